@@ -1,0 +1,89 @@
+"""The state-space model interface every filter in gpf_nav runs on.
+
+A model describes, batched over particles (arrays shaped ``(N, n)``):
+
+* the nominal drift ``f(x, t, u)`` of ``dx = f dt + G dB`` and its mean transition over ``dt``,
+* the process-noise covariance ``Q(dt)`` of that transition,
+* the measurement ``h(x)``, its Jacobian ``H(x)`` shaped ``(N, m, n)`` and the noise covariance ``R``,
+* a residual hook ``y - h(x)`` that wraps angular components to (-pi, pi].
+
+Filters never assume more than this, so a user model only has to subclass :class:`StateSpaceModel`.
+"""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+import numpy as np
+
+
+def wrap_angle(a: np.ndarray) -> np.ndarray:
+    """Wrap angles to (-pi, pi]."""
+    return np.pi - np.mod(np.pi - a, 2.0 * np.pi)
+
+
+class StateSpaceModel(ABC):
+    """A continuous-time state-space model ``dx = f(x,t,u) dt + G dB``, ``y = h(x) + v``.
+
+    Attributes:
+        state_dim: n, the state dimension.
+        measurement_dim: m, the measurement dimension.
+        angular: boolean mask ``(m,)`` of measurement components that are angles (residuals wrapped).
+        position_index: indices of the state components that are a position (used by ROS adapters and
+            metrics; may be empty).
+        velocity_index: indices of the velocity components (may be empty).
+    """
+
+    state_dim: int
+    measurement_dim: int
+    angular: np.ndarray
+    position_index: tuple[int, ...] = ()
+    velocity_index: tuple[int, ...] = ()
+
+    @abstractmethod
+    def drift(self, x: np.ndarray, t: float = 0.0, u: np.ndarray | None = None) -> np.ndarray:
+        """Nominal drift ``f(x, t, u)``: ``(N, n) -> (N, n)``."""
+
+    @abstractmethod
+    def transition(self, x: np.ndarray, dt: float, t: float = 0.0,
+                   u: np.ndarray | None = None) -> np.ndarray:
+        """Mean transition: the noise-free flow of the drift over ``dt``, ``(N, n) -> (N, n)``."""
+
+    @abstractmethod
+    def transition_jacobian(self, x: np.ndarray, dt: float, t: float = 0.0,
+                            u: np.ndarray | None = None) -> np.ndarray:
+        """Jacobian of :meth:`transition` with respect to ``x``: ``(N, n) -> (N, n, n)``."""
+
+    @abstractmethod
+    def process_noise(self, dt: float) -> np.ndarray:
+        """Covariance ``(n, n)`` of the state noise accumulated over ``dt``."""
+
+    @abstractmethod
+    def measure(self, x: np.ndarray) -> np.ndarray:
+        """Noise-free measurement ``h(x)``: ``(N, n) -> (N, m)``."""
+
+    @abstractmethod
+    def measurement_jacobian(self, x: np.ndarray) -> np.ndarray:
+        """Measurement Jacobian ``H(x)``: ``(N, n) -> (N, m, n)``."""
+
+    @abstractmethod
+    def measurement_noise(self) -> np.ndarray:
+        """Measurement-noise covariance ``R`` ``(m, m)``."""
+
+    def residual(self, y: np.ndarray, y_pred: np.ndarray) -> np.ndarray:
+        """Measurement residual ``y - y_pred`` with angular components wrapped to (-pi, pi].
+
+        Shapes broadcast: ``(m,)`` against ``(N, m)`` gives ``(N, m)``.
+        """
+        r = np.asarray(y, dtype=float) - y_pred
+        if np.any(self.angular):
+            r = np.array(r, dtype=float, copy=True)
+            r[..., self.angular] = wrap_angle(r[..., self.angular])
+        return r
+
+    def measurement_mean(self, y: np.ndarray, weights: np.ndarray) -> np.ndarray:
+        """Weighted mean of measurements ``(K, m)`` with weights ``(K,)``; angles by circular mean."""
+        mean = weights @ y
+        if np.any(self.angular):
+            a = y[:, self.angular]
+            mean[self.angular] = np.arctan2(weights @ np.sin(a), weights @ np.cos(a))
+        return mean

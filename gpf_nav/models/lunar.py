@@ -1,0 +1,173 @@
+"""Lunar-descent model of the paper's Section 7, in SI units (m, m/s, rad, s).
+
+State ``x = [r, v]`` (``(N, 6)``) in a Moon-centred inertial frame. Nominal drift: two-body gravity
+``dv/dt = -mu r / |r|^3 + u`` with ``u`` an optional IMU specific force already rotated to the world
+frame. ``mu_scale`` multiplies ``mu``: the filters use 1, the truth ``1 + epsilon`` (9 % by default), the
+paper's structural mismatch. Measurements are range, azimuth and elevation of the vehicle seen from a
+station (default: the Moon's centre), azimuth ``atan2(dy, dx)`` and elevation ``atan2(dz, |(dx, dy)|)``.
+Process noise is white acceleration of spectral density ``accel_noise_density**2`` (m^2/s^3).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from gpf_nav.models.base import StateSpaceModel
+
+MU_MOON = 4.9028e12
+"""Lunar gravitational parameter, m^3/s^2 (the paper's 4902.8 km^3/s^2)."""
+MOON_RADIUS = 1.7374e6
+"""Mean lunar radius, m."""
+
+_MIN_RANGE_SQ = 1.0  # m^2: floor that keeps h and H finite with the vehicle at the station
+_MIN_HORIZONTAL_SQ = 1e-6  # m^2: floor for the azimuth derivative at elevation +-pi/2
+
+
+def _like(x: np.ndarray, cols: int) -> np.ndarray:
+    """Uninitialised ``(N, cols)`` array stored column-major, so ``out[:, j]`` is contiguous."""
+    return np.empty((cols, x.shape[0])).T
+
+
+class LunarDescentModel(StateSpaceModel):
+    """Two-body lunar gravity with range/azimuth/elevation measurements.
+
+    Args:
+        mu: gravitational parameter, m^3/s^2.
+        mu_scale: multiplier of ``mu`` (``1 + epsilon`` for the mismatched truth).
+        station: observer position ``(3,)`` in metres, world frame.
+        range_noise_std: range noise standard deviation, m.
+        angle_noise_std: azimuth and elevation noise standard deviation, rad.
+        accel_noise_density: process-noise acceleration density, m/s^(3/2).
+        max_step: longest integration sub-step of :meth:`transition`, s.
+    """
+
+    state_dim = 6
+    measurement_dim = 3
+    angular = np.array([False, True, True])
+    position_index = (0, 1, 2)
+    velocity_index = (3, 4, 5)
+
+    def __init__(self, mu: float = MU_MOON, mu_scale: float = 1.0, station=(0.0, 0.0, 0.0),
+                 range_noise_std: float = 30.0, angle_noise_std: float = math.radians(0.03),
+                 accel_noise_density: float = 1e-3, max_step: float = 10.0):
+        if range_noise_std <= 0 or angle_noise_std <= 0 or accel_noise_density < 0 or max_step <= 0:
+            raise ValueError("noise standard deviations and max_step must be positive")
+        self.gm = float(mu) * float(mu_scale)
+        self.station = np.asarray(station, dtype=float).reshape(3)
+        self.range_noise_std = float(range_noise_std)
+        self.angle_noise_std = float(angle_noise_std)
+        self.accel_noise_density = float(accel_noise_density)
+        self.max_step = float(max_step)
+        self._R = np.diag([self.range_noise_std ** 2, self.angle_noise_std ** 2, self.angle_noise_std ** 2])
+
+    # --- dynamics -----------------------------------------------------------------------------------
+    def _acceleration(self, x, y, z, u):
+        """Gravity plus specific force at positions given as three ``(N,)`` columns."""
+        r2 = x * x + y * y + z * z
+        np.maximum(r2, _MIN_RANGE_SQ, out=r2)
+        k = -self.gm * r2 ** -1.5
+        ax, ay, az = k * x, k * y, k * z
+        if u is not None:
+            ax += u[..., 0]
+            ay += u[..., 1]
+            az += u[..., 2]
+        return ax, ay, az
+
+    def drift(self, x, t=0.0, u=None):
+        out = _like(x, 6)
+        out[:, :3] = x[:, 3:]
+        out[:, 3], out[:, 4], out[:, 5] = self._acceleration(x[:, 0], x[:, 1], x[:, 2], _as_input(u))
+        return out
+
+    def transition(self, x, dt, t=0.0, u=None):
+        """Kick-drift-kick leapfrog (second order, symplectic) in sub-steps of at most ``max_step``."""
+        u = _as_input(u)
+        steps = max(1, math.ceil(abs(dt) / self.max_step))
+        h = dt / steps
+        px, py, pz = x[:, 0].copy(), x[:, 1].copy(), x[:, 2].copy()
+        vx, vy, vz = x[:, 3].copy(), x[:, 4].copy(), x[:, 5].copy()
+        ax, ay, az = self._acceleration(px, py, pz, u)
+        for _ in range(steps):
+            vx += 0.5 * h * ax
+            vy += 0.5 * h * ay
+            vz += 0.5 * h * az
+            px += h * vx
+            py += h * vy
+            pz += h * vz
+            ax, ay, az = self._acceleration(px, py, pz, u)
+            vx += 0.5 * h * ax
+            vy += 0.5 * h * ay
+            vz += 0.5 * h * az
+        out = _like(x, 6)
+        out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4], out[:, 5] = px, py, pz, vx, vy, vz
+        return out
+
+    def gravity_gradient(self, r: np.ndarray) -> np.ndarray:
+        """``d(gravity)/dr`` ``(N, 3, 3)`` at positions ``(N, 3)``."""
+        r2 = np.maximum(np.einsum("ij,ij->i", r, r), _MIN_RANGE_SQ)
+        k = -self.gm * r2 ** -1.5
+        outer = r[:, :, None] * r[:, None, :] / r2[:, None, None]
+        return k[:, None, None] * (np.eye(3) - 3.0 * outer)
+
+    def transition_jacobian(self, x, dt, t=0.0, u=None):
+        """Second-order Taylor ``I + A h + (A h)^2 / 2`` chained over the sub-steps of :meth:`transition`."""
+        steps = max(1, math.ceil(abs(dt) / self.max_step))
+        h = dt / steps
+        n = x.shape[0]
+        phi = np.broadcast_to(np.eye(6), (n, 6, 6)).copy()
+        state = np.asarray(x, dtype=float)
+        for _ in range(steps):
+            a = np.zeros((n, 6, 6))
+            a[:, :3, 3:] = np.eye(3)
+            a[:, 3:, :3] = self.gravity_gradient(state[:, :3])
+            ah = a * h
+            step = np.eye(6) + ah + ah @ ah * 0.5
+            phi = step @ phi
+            if steps > 1:
+                state = self.transition(state, h, t, u)
+        return phi
+
+    def process_noise(self, dt):
+        q = self.accel_noise_density ** 2
+        dt = abs(float(dt))
+        i3 = np.eye(3)
+        return q * np.block([[dt ** 3 / 3.0 * i3, dt ** 2 / 2.0 * i3], [dt ** 2 / 2.0 * i3, dt * i3]])
+
+    # --- measurements -------------------------------------------------------------------------------
+    def measure(self, x):
+        dx = x[:, 0] - self.station[0]
+        dy = x[:, 1] - self.station[1]
+        dz = x[:, 2] - self.station[2]
+        horizontal = np.sqrt(dx * dx + dy * dy)
+        out = _like(x, 3)
+        out[:, 0] = np.sqrt(horizontal * horizontal + dz * dz)
+        out[:, 1] = np.arctan2(dy, dx)
+        out[:, 2] = np.arctan2(dz, horizontal)
+        return out
+
+    def measurement_jacobian(self, x):
+        dx = x[:, 0] - self.station[0]
+        dy = x[:, 1] - self.station[1]
+        dz = x[:, 2] - self.station[2]
+        h2 = np.maximum(dx * dx + dy * dy, _MIN_HORIZONTAL_SQ)
+        rho2 = np.maximum(h2 + dz * dz, _MIN_RANGE_SQ)
+        rho = np.sqrt(rho2)
+        hor = np.sqrt(h2)
+        jac = np.zeros((3, 6, x.shape[0]))
+        jac[0, 0], jac[0, 1], jac[0, 2] = dx / rho, dy / rho, dz / rho
+        jac[1, 0], jac[1, 1] = -dy / h2, dx / h2
+        k = -dz / (rho2 * hor)
+        jac[2, 0], jac[2, 1], jac[2, 2] = k * dx, k * dy, hor / rho2
+        return jac.transpose(2, 0, 1)
+
+    def measurement_noise(self):
+        return self._R
+
+
+def _as_input(u):
+    """Specific force as ``(3,)`` or ``(N, 3)`` float array, or None."""
+    if u is None:
+        return None
+    u = np.asarray(u, dtype=float)
+    return None if not np.any(u) else u

@@ -1,0 +1,37 @@
+"""ament_python build of gpf_nav; also a plain pip-installable package (see README)."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "gpf_nav"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
+        ("share/" + PACKAGE, ["package.xml"]),
+        ("share/" + PACKAGE + "/config", glob("config/*.yaml")),
+        ("share/" + PACKAGE + "/launch", glob("launch/*.py")),
+    ],
+    python_requires=">=3.10",
+    install_requires=["setuptools", "numpy", "scipy"],
+    extras_require={
+        # ROS 2 Jazzy Python client from PyPI, for machines without a system ROS installation.
+        "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces"],
+        "experiments": ["matplotlib", "tqdm", "dask[distributed]"],
+        "test": ["pytest", "hypothesis", "colcon-core", "colcon-ros"],
+    },
+    zip_safe=True,
+    maintainer="gpf_nav maintainers",
+    maintainer_email="maintainers@gpf-nav.org",
+    description="Geometric Projection Particle Filter navigation for ROS 2",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "gpf-nav = gpf_nav.cli:main",
+        ],
+    },
+)
