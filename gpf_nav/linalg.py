@@ -1,7 +1,8 @@
-"""Small dense linear algebra batched over particles: factors and solves of ``m x m`` systems.
+"""Small dense linear algebra batched over particles, particle index last.
 
-Matrices are ``(N, m, m)`` and vectors ``(N, m)``. Solves of dimension up to 3 are written in closed form
-(faster than ``np.linalg.solve`` on many tiny systems); larger ones fall back to LAPACK.
+Matrices are ``(m, m, N)`` and vectors ``(m, N)`` so every entry is a contiguous row of length N.
+Symmetric positive definite solves of dimension up to 3 are written in closed form (much faster than
+``np.linalg.solve`` on many tiny systems); larger ones fall back to LAPACK.
 """
 from __future__ import annotations
 
@@ -9,57 +10,45 @@ import numpy as np
 
 
 def psd_sqrt(cov: np.ndarray) -> np.ndarray:
-    """Lower-triangular-like square root ``L`` with ``L L^T = cov`` for a symmetric PSD ``(n, n)``.
+    """Square root ``L`` with ``L L^T = cov`` of a symmetric PSD ``(n, n)``; never raises.
 
     Cholesky when ``cov`` is positive definite; otherwise an eigen-decomposition with negative
-    eigenvalues clipped to zero, so a singular (or slightly indefinite) covariance never raises.
+    eigenvalues clipped to zero.
     """
-    cov = 0.5 * (cov + cov.T)
+    factor = cholesky_or_none(cov)
+    if factor is not None:
+        return factor
+    vals, vecs = np.linalg.eigh(0.5 * (cov + cov.T))
+    return vecs * np.sqrt(np.clip(vals, 0.0, None))
+
+
+def cholesky_or_none(cov: np.ndarray) -> np.ndarray | None:
+    """Cholesky factor of a symmetric ``(n, n)`` matrix, or None when it is not positive definite."""
     try:
-        return np.linalg.cholesky(cov)
+        return np.linalg.cholesky(0.5 * (cov + cov.T))
     except np.linalg.LinAlgError:
-        vals, vecs = np.linalg.eigh(cov)
-        return vecs * np.sqrt(np.clip(vals, 0.0, None))
+        return None
 
 
 def solve_spd(S: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Solve ``S a = b`` for symmetric positive definite ``S`` ``(N, m, m)``, ``b`` ``(N, m)``."""
-    m = S.shape[-1]
+    """Solve ``S a = b`` for symmetric positive definite ``S`` ``(m, m, N)`` and ``b`` ``(m, N)``."""
+    m = S.shape[0]
     if m == 1:
-        return b / S[:, 0, 0:1]
+        return b / S[0]
     if m == 2:
-        a, c, d = S[:, 0, 0], S[:, 0, 1], S[:, 1, 1]
-        det = a * d - c * c
-        out = np.empty_like(b)
-        out[:, 0] = (d * b[:, 0] - c * b[:, 1]) / det
-        out[:, 1] = (a * b[:, 1] - c * b[:, 0]) / det
-        return out
+        a, c, d = S[0, 0], S[0, 1], S[1, 1]
+        inv_det = 1.0 / (a * d - c * c)
+        return np.stack([(d * b[0] - c * b[1]) * inv_det, (a * b[1] - c * b[0]) * inv_det])
     if m == 3:
-        a, bb, c = S[:, 0, 0], S[:, 0, 1], S[:, 0, 2]
-        d, e, f = S[:, 1, 1], S[:, 1, 2], S[:, 2, 2]
+        a, bb, c = S[0, 0], S[0, 1], S[0, 2]
+        d, e, f = S[1, 1], S[1, 2], S[2, 2]
         # cofactors of the symmetric matrix [[a, bb, c], [bb, d, e], [c, e, f]]
         A = d * f - e * e
         B = c * e - bb * f
         C = bb * e - c * d
-        D = a * f - c * c
-        E = bb * c - a * e
-        F = a * d - bb * bb
-        det = a * A + bb * B + c * C
-        x0, x1, x2 = b[:, 0], b[:, 1], b[:, 2]
-        out = np.empty_like(b)
-        out[:, 0] = (A * x0 + B * x1 + C * x2) / det
-        out[:, 1] = (B * x0 + D * x1 + E * x2) / det
-        out[:, 2] = (C * x0 + E * x1 + F * x2) / det
-        return out
-    return np.linalg.solve(S, b[..., None])[..., 0]
-
-
-def gram(H: np.ndarray) -> np.ndarray:
-    """``H H^T`` ``(N, m, m)`` of ``H`` ``(N, m, n)``, one column pair at a time (contiguous when H is)."""
-    N, m, _ = H.shape
-    S = np.empty((m, m, N)).transpose(2, 0, 1)
-    for i in range(m):
-        for j in range(i, m):
-            S[:, i, j] = sum(H[:, i, k] * H[:, j, k] for k in range(H.shape[2]))
-            S[:, j, i] = S[:, i, j]
-    return S
+        inv_det = 1.0 / (a * A + bb * B + c * C)
+        x0, x1, x2 = b[0] * inv_det, b[1] * inv_det, b[2] * inv_det
+        return np.stack([A * x0 + B * x1 + C * x2,
+                         B * x0 + (a * f - c * c) * x1 + (bb * c - a * e) * x2,
+                         C * x0 + (bb * c - a * e) * x1 + (a * d - bb * bb) * x2])
+    return np.linalg.solve(S.transpose(2, 0, 1), b.T[..., None])[..., 0].T

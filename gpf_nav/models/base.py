@@ -16,9 +16,12 @@ from abc import ABC, abstractmethod
 import numpy as np
 
 
+_TWO_PI = 2.0 * np.pi
+
+
 def wrap_angle(a: np.ndarray) -> np.ndarray:
     """Wrap angles to (-pi, pi]."""
-    return np.pi - np.mod(np.pi - a, 2.0 * np.pi)
+    return a - _TWO_PI * np.ceil((a - np.pi) * (1.0 / _TWO_PI))
 
 
 class StateSpaceModel(ABC):
@@ -65,6 +68,10 @@ class StateSpaceModel(ABC):
     def measurement_jacobian(self, x: np.ndarray) -> np.ndarray:
         """Measurement Jacobian ``H(x)``: ``(N, n) -> (N, m, n)``."""
 
+    def measure_and_jacobian(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(h(x) (N, m), H(x) (N, m, n))`` together; override to share work between the two."""
+        return self.measure(x), self.measurement_jacobian(x)
+
     @abstractmethod
     def measurement_noise(self) -> np.ndarray:
         """Measurement-noise covariance ``R`` ``(m, m)``."""
@@ -75,8 +82,7 @@ class StateSpaceModel(ABC):
         Shapes broadcast: ``(m,)`` against ``(N, m)`` gives ``(N, m)``.
         """
         r = np.asarray(y, dtype=float) - y_pred
-        if np.any(self.angular):
-            r = np.array(r, dtype=float, copy=True)
+        if self.angular.any():
             r[..., self.angular] = wrap_angle(r[..., self.angular])
         return r
 

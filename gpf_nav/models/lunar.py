@@ -24,11 +24,6 @@ _MIN_RANGE_SQ = 1.0  # m^2: floor that keeps h and H finite with the vehicle at 
 _MIN_HORIZONTAL_SQ = 1e-6  # m^2: floor for the azimuth derivative at elevation +-pi/2
 
 
-def _like(x: np.ndarray, cols: int) -> np.ndarray:
-    """Uninitialised ``(N, cols)`` array stored column-major, so ``out[:, j]`` is contiguous."""
-    return np.empty((cols, x.shape[0])).T
-
-
 class LunarDescentModel(StateSpaceModel):
     """Two-body lunar gravity with range/azimuth/elevation measurements.
 
@@ -62,46 +57,36 @@ class LunarDescentModel(StateSpaceModel):
         self._R = np.diag([self.range_noise_std ** 2, self.angle_noise_std ** 2, self.angle_noise_std ** 2])
 
     # --- dynamics -----------------------------------------------------------------------------------
-    def _acceleration(self, x, y, z, u):
-        """Gravity plus specific force at positions given as three ``(N,)`` columns."""
-        r2 = x * x + y * y + z * z
+    # Internally the model works on transposed blocks ``(3, N)``: rows are contiguous when the filter
+    # stores particles as ``(n, N)`` and passes the ``(N, n)`` transpose.
+    def _acceleration(self, r: np.ndarray, u) -> np.ndarray:
+        """Gravity plus specific force ``(3, N)`` at positions ``(3, N)``."""
+        r2 = np.einsum("ij,ij->j", r, r)
         np.maximum(r2, _MIN_RANGE_SQ, out=r2)
-        k = -self.gm * r2 ** -1.5
-        ax, ay, az = k * x, k * y, k * z
+        k = -self.gm / (r2 * np.sqrt(r2))
+        a = r * k
         if u is not None:
-            ax += u[..., 0]
-            ay += u[..., 1]
-            az += u[..., 2]
-        return ax, ay, az
+            a += u.T if u.ndim == 2 else u[:, None]
+        return a
 
     def drift(self, x, t=0.0, u=None):
-        out = _like(x, 6)
-        out[:, :3] = x[:, 3:]
-        out[:, 3], out[:, 4], out[:, 5] = self._acceleration(x[:, 0], x[:, 1], x[:, 2], _as_input(u))
-        return out
+        xt = x.T
+        return np.concatenate([xt[3:], self._acceleration(xt[:3], _as_input(u))]).T
 
     def transition(self, x, dt, t=0.0, u=None):
         """Kick-drift-kick leapfrog (second order, symplectic) in sub-steps of at most ``max_step``."""
         u = _as_input(u)
         steps = max(1, math.ceil(abs(dt) / self.max_step))
         h = dt / steps
-        px, py, pz = x[:, 0].copy(), x[:, 1].copy(), x[:, 2].copy()
-        vx, vy, vz = x[:, 3].copy(), x[:, 4].copy(), x[:, 5].copy()
-        ax, ay, az = self._acceleration(px, py, pz, u)
+        xt = x.T
+        r, v = xt[:3].copy(), xt[3:].copy()
+        a = self._acceleration(r, u)
         for _ in range(steps):
-            vx += 0.5 * h * ax
-            vy += 0.5 * h * ay
-            vz += 0.5 * h * az
-            px += h * vx
-            py += h * vy
-            pz += h * vz
-            ax, ay, az = self._acceleration(px, py, pz, u)
-            vx += 0.5 * h * ax
-            vy += 0.5 * h * ay
-            vz += 0.5 * h * az
-        out = _like(x, 6)
-        out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4], out[:, 5] = px, py, pz, vx, vy, vz
-        return out
+            v += (0.5 * h) * a
+            r += h * v
+            a = self._acceleration(r, u)
+            v += (0.5 * h) * a
+        return np.concatenate([r, v]).T
 
     def gravity_gradient(self, r: np.ndarray) -> np.ndarray:
         """``d(gravity)/dr`` ``(N, 3, 3)`` at positions ``(N, 3)``."""
@@ -135,30 +120,40 @@ class LunarDescentModel(StateSpaceModel):
         return q * np.block([[dt ** 3 / 3.0 * i3, dt ** 2 / 2.0 * i3], [dt ** 2 / 2.0 * i3, dt * i3]])
 
     # --- measurements -------------------------------------------------------------------------------
+    def _line_of_sight(self, x):
+        d = x.T[:3] - self.station[:, None]
+        h2 = d[0] * d[0] + d[1] * d[1]
+        rho2 = h2 + d[2] * d[2]
+        return d, h2, rho2
+
+    def _measure(self, d, h2, rho2):
+        horizontal = np.sqrt(h2)
+        return np.stack([np.sqrt(rho2), np.arctan2(d[1], d[0]), np.arctan2(d[2], horizontal)]).T
+
     def measure(self, x):
-        dx = x[:, 0] - self.station[0]
-        dy = x[:, 1] - self.station[1]
-        dz = x[:, 2] - self.station[2]
-        horizontal = np.sqrt(dx * dx + dy * dy)
-        out = _like(x, 3)
-        out[:, 0] = np.sqrt(horizontal * horizontal + dz * dz)
-        out[:, 1] = np.arctan2(dy, dx)
-        out[:, 2] = np.arctan2(dz, horizontal)
-        return out
+        return self._measure(*self._line_of_sight(x))
 
     def measurement_jacobian(self, x):
-        dx = x[:, 0] - self.station[0]
-        dy = x[:, 1] - self.station[1]
-        dz = x[:, 2] - self.station[2]
-        h2 = np.maximum(dx * dx + dy * dy, _MIN_HORIZONTAL_SQ)
-        rho2 = np.maximum(h2 + dz * dz, _MIN_RANGE_SQ)
-        rho = np.sqrt(rho2)
+        return self._jacobian(*self._line_of_sight(x))
+
+    def measure_and_jacobian(self, x):
+        los = self._line_of_sight(x)
+        return self._measure(*los), self._jacobian(*los)
+
+    def _jacobian(self, d, h2, rho2):
+        h2 = np.maximum(h2, _MIN_HORIZONTAL_SQ)
+        rho2 = np.maximum(rho2, _MIN_RANGE_SQ)
+        inv_rho = 1.0 / np.sqrt(rho2)
         hor = np.sqrt(h2)
-        jac = np.zeros((3, 6, x.shape[0]))
-        jac[0, 0], jac[0, 1], jac[0, 2] = dx / rho, dy / rho, dz / rho
-        jac[1, 0], jac[1, 1] = -dy / h2, dx / h2
-        k = -dz / (rho2 * hor)
-        jac[2, 0], jac[2, 1], jac[2, 2] = k * dx, k * dy, hor / rho2
+        jac = np.zeros((3, 6, d.shape[1]))
+        jac[0, :3] = d * inv_rho
+        inv_h2 = 1.0 / h2
+        jac[1, 0] = -d[1] * inv_h2
+        jac[1, 1] = d[0] * inv_h2
+        k = -d[2] * inv_rho * inv_rho / hor
+        jac[2, 0] = k * d[0]
+        jac[2, 1] = k * d[1]
+        jac[2, 2] = hor * inv_rho * inv_rho
         return jac.transpose(2, 0, 1)
 
     def measurement_noise(self):

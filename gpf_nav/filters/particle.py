@@ -1,0 +1,267 @@
+"""The sequential Monte Carlo loop shared by the bootstrap PF and the GPF.
+
+A particle filter here differs from another only in its *proposal*: the shift it applies to the
+predicted particles before the process noise is added, and the log-weight correction that shift needs.
+The loop (deterministic drift in ``predict``, proposal + noise + weighting in ``update``, ESS check and
+resampling) is written once, in :class:`ParticleFilter`.
+
+Particles are stored as ``(n, N)`` so numpy works on long contiguous rows; models see the transposed
+``(N, n)`` view, whose columns are then contiguous.
+
+The process noise of an interval is drawn at the next ``update`` (``predict`` only accumulates the
+deterministic flow and the elapsed time). This keeps the proposal a proper Gaussian density
+``q(x_k | x_{k-1}, y_k) = N(flow(x_{k-1}) + shift, Q(dt))`` even when the node publishes predictions
+between measurements; between an update and the next one, :attr:`covariance` includes ``Q(dt)``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from gpf_nav import resampling as resamplers
+from gpf_nav.filters.base import Filter
+from gpf_nav.filters.projection import project
+from gpf_nav.linalg import cholesky_or_none, psd_sqrt
+from gpf_nav.models.base import StateSpaceModel
+
+
+class ParticleFilter(Filter):
+    """SMC loop with a pluggable proposal (the bootstrap proposal by default).
+
+    Args:
+        model: the state-space model.
+        n_particles: number of particles N.
+        resampling: ``systematic`` (default), ``stratified``, ``residual`` or ``multinomial``.
+        ess_threshold: tau in (0, 1]; resample when ESS < tau N.
+        seed: seed of the filter's random generator.
+    """
+
+    def __init__(self, model: StateSpaceModel, n_particles: int = 500, resampling: str = "systematic",
+                 ess_threshold: float = 0.5, seed: int | np.random.Generator | None = None):
+        super().__init__(model, seed)
+        if int(n_particles) < 1:
+            raise ValueError(f"n_particles must be positive, got {n_particles}")
+        if not 0.0 < float(ess_threshold) <= 1.0:
+            raise ValueError(f"ess_threshold must lie in (0, 1], got {ess_threshold}")
+        self.n_particles = int(n_particles)
+        self.ess_threshold = float(ess_threshold)
+        self.resampling = resampling
+        self._resample = resamplers.get(resampling)
+        n = model.state_dim
+        self._x = np.zeros((n, self.n_particles))
+        self._logw = np.full(self.n_particles, -np.log(self.n_particles))
+        self._weights = np.full(self.n_particles, 1.0 / self.n_particles)
+        self._pending_dt = 0.0
+        self._R = np.asarray(model.measurement_noise(), dtype=float)
+        self._whiteners: dict[bytes, np.ndarray] = {}
+        self._noise_cache: tuple[float, np.ndarray | None, np.ndarray | None] = (-1.0, None, None)
+        self.ess = 1.0
+        self.resampled = False
+        self.resample_count = 0
+        self.log_likelihood = 0.0
+        self._costate = np.zeros((self.n_particles, model.measurement_dim))
+
+    # --- state ---------------------------------------------------------------------------------------
+    def initialize(self, mean, cov):
+        mean, cov = self._check_prior(mean, cov)
+        z = self.rng.standard_normal((mean.size, self.n_particles))
+        self._x = np.ascontiguousarray(mean[:, None] + psd_sqrt(cov) @ z)
+        self._set_uniform_weights()
+        self._pending_dt = 0.0
+        self.initialized = True
+
+    @property
+    def particles(self) -> np.ndarray:
+        """Particles ``(N, n)`` (a read-only view; the deterministic part while noise is pending)."""
+        view = self._x.T
+        view.flags.writeable = False
+        return view
+
+    @property
+    def weights(self) -> np.ndarray:
+        """Normalised weights ``(N,)``."""
+        return self._weights
+
+    @property
+    def mean(self):
+        return self._x @ self._weights
+
+    @property
+    def covariance(self):
+        d = self._x - self.mean[:, None]
+        cov = (d * self._weights) @ d.T
+        if self._pending_dt > 0.0:
+            cov = cov + self.model.process_noise(self._pending_dt)
+        return 0.5 * (cov + cov.T)
+
+    @property
+    def normalized_ess(self) -> float:
+        """ESS / N in (0, 1] after the last update (before any resampling)."""
+        return self.ess
+
+    @property
+    def costate(self) -> np.ndarray:
+        """Per-particle geometric co-state ``(N, m)`` of the last update, in whitened measurement
+        coordinates per second; zero for components not measured (or not computed)."""
+        return self._costate
+
+    @property
+    def costate_mean(self) -> np.ndarray:
+        """Weighted mean co-state ``(m,)``."""
+        return self._weights @ self._costate
+
+    @property
+    def costate_norm_mean(self) -> float:
+        """Weighted mean of the per-particle co-state norms."""
+        return float(self._weights @ np.sqrt(np.einsum("ij,ij->i", self._costate, self._costate)))
+
+    @property
+    def costate_norm_max(self) -> float:
+        """Largest per-particle co-state norm."""
+        return float(np.sqrt(np.einsum("ij,ij->i", self._costate, self._costate).max()))
+
+    # --- the loop ------------------------------------------------------------------------------------
+    def predict(self, dt, u=None):
+        dt = self._check_dt(dt)
+        if dt == 0.0:
+            return
+        self._x = np.ascontiguousarray(self.model.transition(self._x.T, dt, self.time, u).T)
+        self._pending_dt += dt
+        self.time += dt
+
+    def update(self, y):
+        y, rows = self._check_measurement(y)
+        dt = self._pending_dt
+        n = self.model.state_dim
+        inverse_factor = z = None
+        noise = 0.0
+        if dt > 0.0:
+            factor, inverse_factor = self._noise_factors(dt)
+            z = self.rng.standard_normal((n, self.n_particles))
+            noise = factor @ z
+        shift, log_correction = self._propose(self._x, y, rows, dt, inverse_factor, z)
+        x = self._x + noise if shift is None else self._x + shift + noise
+        self._x = x
+        self._pending_dt = 0.0
+        increment = log_correction
+        if rows.any():
+            increment = increment + self._log_likelihood(x, y, rows)
+        self._reweight(increment)
+        self._after_update(y, rows)
+
+    def _noise_factors(self, dt: float) -> tuple[np.ndarray, np.ndarray | None]:
+        """``(L, L^-1)`` with ``L L^T = Q(dt)``; ``L^-1`` is None when ``Q`` is not positive definite.
+
+        Cached for the last ``dt`` (measurements usually arrive at a fixed rate)."""
+        if self._noise_cache[0] != dt:
+            q = self.model.process_noise(dt)
+            chol = cholesky_or_none(q)
+            if chol is None:
+                self._noise_cache = (dt, psd_sqrt(q), None)
+            else:
+                self._noise_cache = (dt, chol, np.linalg.inv(chol))
+        return self._noise_cache[1], self._noise_cache[2]
+
+    def _propose(self, x_pred, y, rows, dt, inverse_factor, z):
+        """Proposal hook: ``(shift (n, N) or None, log-weight correction (N,) or 0.0)``.
+
+        ``x_pred`` are the predicted particles ``(n, N)``, ``inverse_factor`` the inverse Cholesky
+        factor ``L^-1`` of ``Q(dt)`` (None when ``Q`` is not positive definite) and ``z`` ``(n, N)`` the
+        standard normal draws of the process noise ``L z`` (None when ``dt == 0``).
+        The bootstrap proposal moves nothing.
+        """
+        return None, 0.0
+
+    def _after_update(self, y, rows) -> None:
+        """Hook run after weighting and resampling (the GPF keeps its measurement history here)."""
+
+    def _innovation(self, states: np.ndarray, y: np.ndarray, rows: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+        """Jacobian ``(N, k, n)`` and innovation ``y - h(x)`` ``(N, k)`` of the measured rows."""
+        h, H = self.model.measure_and_jacobian(states)
+        return H[:, rows, :], self.model.residual(y, h)[:, rows]
+
+    # --- weighting -----------------------------------------------------------------------------------
+    def _whitener(self, rows: np.ndarray) -> np.ndarray:
+        """``W`` ``(k, k)`` with ``W R_rows W^T = I`` for the measured rows."""
+        key = rows.tobytes()
+        if key not in self._whiteners:
+            r = self._R[np.ix_(rows, rows)]
+            self._whiteners[key] = np.linalg.inv(np.linalg.cholesky(r))
+        return self._whiteners[key]
+
+    def _log_likelihood(self, x: np.ndarray, y: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """Gaussian ``log p(y_rows | x)`` ``(N,)`` for particles ``x`` ``(n, N)``."""
+        e = self.model.residual(y, self.model.measure(x.T))[:, rows]
+        w = self._whitener(rows)
+        ew = e @ w.T
+        log_det = -np.log(np.diag(w)).sum()
+        return -0.5 * np.einsum("ij,ij->i", ew, ew) - log_det - 0.5 * rows.sum() * np.log(2.0 * np.pi)
+
+    def _reweight(self, increment) -> None:
+        logw = self._logw + increment
+        logw = np.where(np.isnan(logw), -np.inf, logw)
+        peak = logw.max()
+        total = peak + np.log(np.exp(logw - peak).sum()) if np.isfinite(peak) else peak
+        self.resampled = False
+        if not np.isfinite(total):
+            # every particle is incompatible with the measurement: keep the prior weights, say so
+            self.log_likelihood = -np.inf
+            self.ess = float(resamplers.effective_sample_size(self._weights)) / self.n_particles
+            return
+        self.log_likelihood = float(total)  # previous log-weights are normalised
+        self._logw = logw - total
+        self._weights = np.exp(self._logw)
+        self.ess = resamplers.effective_sample_size(self._weights) / self.n_particles
+        if self.ess < self.ess_threshold:
+            ancestors = self._resample(self._weights, self.rng)
+            self._x = np.ascontiguousarray(self._x[:, ancestors])
+            self._on_resample(ancestors)
+            self._set_uniform_weights()
+            self.resampled = True
+            self.resample_count += 1
+
+    def _on_resample(self, ancestors: np.ndarray) -> None:
+        """Per-particle quantities follow their ancestors."""
+        self._costate = self._costate[ancestors]
+
+    def _set_uniform_weights(self) -> None:
+        self._logw = np.full(self.n_particles, -np.log(self.n_particles))
+        self._weights = np.full(self.n_particles, 1.0 / self.n_particles)
+
+
+class BootstrapPF(ParticleFilter):
+    """Bootstrap particle filter (the paper's SPF): the prior transition is the proposal.
+
+    Args:
+        compute_costate: also compute, as a diagnostic only, the co-state the geometric projection
+            would apply to the predicted particles (innovation reference); it costs a projection.
+        regularization: relative Tikhonov ``eps`` of that diagnostic projection.
+        Other arguments as :class:`ParticleFilter`.
+    """
+
+    def __init__(self, model: StateSpaceModel, n_particles: int = 500, resampling: str = "systematic",
+                 ess_threshold: float = 0.5, seed: int | np.random.Generator | None = None,
+                 compute_costate: bool = False, regularization: float = 1e-6):
+        super().__init__(model, n_particles, resampling, ess_threshold, seed)
+        self.compute_costate = bool(compute_costate)
+        self.regularization = float(regularization)
+
+    def _propose(self, x_pred, y, rows, dt, inverse_factor, z):
+        if self.compute_costate and dt > 0.0 and rows.any():
+            H, r = self._innovation(x_pred.T, y, rows)
+            self._costate = np.zeros_like(self._costate)
+            self._costate[:, rows] = project(H, r, self._whitener(rows), self.regularization)[1] / dt
+        return None, 0.0
+
+
+def gaussian_shift_correction(shift: np.ndarray, inverse_factor: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """``log p(x|x_prev) - log q(x|x_prev, y)`` for ``q`` the prior transition shifted by ``shift``.
+
+    With ``x = flow + shift + L z`` and ``Q = L L^T``: ``-(L^-1 shift) . z - |L^-1 shift|^2 / 2``.
+    ``shift`` and ``z`` are ``(n, N)``, ``inverse_factor`` is ``L^-1`` ``(n, n)``; returns ``(N,)``.
+    """
+    s = inverse_factor @ shift
+    return -np.einsum("ij,ij->j", s, z) - 0.5 * np.einsum("ij,ij->j", s, s)
+
+
+__all__ = ["ParticleFilter", "BootstrapPF", "gaussian_shift_correction"]

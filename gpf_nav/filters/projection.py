@@ -1,0 +1,47 @@
+"""Geometric projection onto the measurement-consistent subspace, batched over particles.
+
+For predicted particles ``x`` and a reference innovation ``r`` the projection is
+
+    shift = H^T (H H^T + eps I)^-1 r,        co-state  lambda = (H H^T + eps I)^-1 r / dt,
+
+with ``H`` and ``r`` first whitened by the measurement noise (``W R W^T = I``), so measurement rows in
+metres and radians are commensurate, and ``eps`` taken relative to the mean eigenvalue of ``H H^T``, so
+it is dimensionless. This is the consistent form of Algorithm 1's projection line (``H^T lambda dt``).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from gpf_nav.linalg import solve_spd
+
+
+def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """Projection shift and whitened co-state increment.
+
+    Args:
+        H: measurement Jacobian of the measured rows ``(N, k, n)``.
+        r: reference innovation of those rows ``(N, k)`` (angles already wrapped).
+        W: whitener ``(k, k)`` of the rows' noise covariance.
+        regularization: relative Tikhonov ``eps`` (dimensionless).
+
+    Returns:
+        ``shift`` ``(n, N)`` to add to the particles and ``a = (Hw Hw^T + eps I)^-1 W r`` ``(N, k)``
+        (the co-state times ``dt``, in whitened measurement coordinates).
+    """
+    Ht = H.transpose(1, 2, 0)  # (k, n, N)
+    columns = np.flatnonzero(Ht.any(axis=(0, 2)))  # state components the measurement depends on
+    Hw = np.einsum("ij,jcn->icn", W, Ht[:, columns])
+    rw = W @ r.T
+    S = np.einsum("icn,jcn->ijn", Hw, Hw)
+    k = S.shape[0]
+    trace = np.einsum("iin->n", S)
+    # relative Tikhonov term; a zero Jacobian (degenerate geometry) gets unit damping and a zero shift
+    damping = np.where(trace > 0.0, regularization * trace / k, 1.0)
+    for i in range(k):
+        S[i, i] += damping
+    a = solve_spd(S, rw)
+    a[~np.isfinite(a)] = 0.0
+    shift = np.zeros((H.shape[2], H.shape[0]))
+    shift[columns] = np.einsum("icn,in->cn", Hw, a)
+    return shift, a.T
