@@ -1,0 +1,34 @@
+"""The ``gpf-nav`` command: one entry point, one module per sub-command.
+
+    gpf-nav bench        per-step cost of every filter (``gpf_nav.experiments.bench``)
+    gpf-nav montecarlo   the paper's Monte Carlo table (``gpf_nav.experiments.montecarlo``)
+    gpf-nav sweep        mismatch / noise sweeps (``gpf_nav.experiments.sweep``)
+    gpf-nav demo         simulator + estimator over ROS 2, with a summary (``gpf_nav.ros.demo``)
+
+Sub-command modules are imported lazily, so e.g. ``bench`` needs neither ROS nor matplotlib.
+"""
+from __future__ import annotations
+
+import importlib
+import sys
+
+COMMANDS = {
+    "bench": "gpf_nav.experiments.bench",
+    "montecarlo": "gpf_nav.experiments.montecarlo",
+    "sweep": "gpf_nav.experiments.sweep",
+    "demo": "gpf_nav.ros.demo",
+}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Dispatch ``gpf-nav <command> [args]`` to ``<module>.main(args)``; returns the exit code."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if not argv or argv[0] in ("-h", "--help") or argv[0] not in COMMANDS:
+        print(__doc__.strip())
+        return 0 if argv and argv[0] in ("-h", "--help") else 2
+    module = importlib.import_module(COMMANDS[argv[0]])
+    return int(module.main(argv[1:]) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
