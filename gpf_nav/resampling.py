@@ -48,10 +48,13 @@ def residual(weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """Residual resampling: ``floor(N w)`` copies each, the remainder drawn multinomially."""
     n = weights.size
     scaled = n * weights / weights.sum()
-    counts = np.floor(scaled).astype(np.intp)
+    # the tolerance keeps N * (1/N) == 0.999... from losing its deterministic copy to round-off
+    counts = np.floor(scaled + 1e-9).astype(np.intp)
+    if counts.sum() > n:
+        counts = np.floor(scaled).astype(np.intp)
     remaining = n - int(counts.sum())
     if remaining > 0:
-        rest = scaled - counts
+        rest = np.clip(scaled - counts, 0.0, None)
         counts += rng.multinomial(remaining, rest / rest.sum())
     return _from_counts(counts)
 

@@ -15,6 +15,13 @@ then weights them. Options:
   posterior is then exact as N grows. It needs ``Q(dt)`` positive definite; where it is not (``dt = 0``,
   a noise-free model), the update does not project.
 
+* ``metric="euclidean"`` (the paper: ``H^T (H H^T + eps I)^-1``, ``eps`` relative) or
+  ``metric="process_noise"``: the projection in the metric of ``Q(dt)``,
+  ``Q H^T (H Q H^T + eps R)^-1`` (``eps`` absolute), which moves velocity with position the way the
+  process noise correlates them. With ``eps = 1`` it is the mean of the locally optimal proposal, which
+  keeps the ``corrected`` weights well spread; the Euclidean full projection shifts position alone and
+  its exact weights degenerate quickly (see docs/filters.md).
+
 The geometric co-state ``lambda = (H H^T + eps I)^-1 r / dt`` is kept per particle (whitened units).
 """
 from __future__ import annotations
@@ -26,6 +33,7 @@ from gpf_nav.filters.projection import project
 from gpf_nav.models.base import StateSpaceModel
 
 REFERENCES = ("innovation", "increment")
+METRICS = ("euclidean", "process_noise")
 WEIGHTINGS = ("likelihood", "corrected")
 
 
@@ -37,14 +45,16 @@ class GeometricProjectionPF(ParticleFilter):
         n_particles: number of particles N.
         reference: ``innovation`` (default) or ``increment`` (Algorithm 1 as printed).
         weighting: ``likelihood`` (default, the paper's experiments) or ``corrected`` (exact).
-        regularization: relative Tikhonov ``eps`` > 0 of the projection (dimensionless).
+        metric: ``euclidean`` (default, the paper) or ``process_noise``.
+        regularization: Tikhonov ``eps`` > 0 of the projection (dimensionless; relative for the
+            Euclidean metric, in units of the measurement noise for ``process_noise``).
         resampling: resampling scheme name.
         ess_threshold: tau in (0, 1].
         seed: seed of the filter's random generator.
     """
 
     def __init__(self, model: StateSpaceModel, n_particles: int = 500, reference: str = "innovation",
-                 weighting: str = "likelihood", regularization: float = 1e-6,
+                 weighting: str = "likelihood", metric: str = "euclidean", regularization: float = 1e-6,
                  resampling: str = "systematic", ess_threshold: float = 0.5,
                  seed: int | np.random.Generator | None = None):
         super().__init__(model, n_particles, resampling, ess_threshold, seed)
@@ -52,10 +62,13 @@ class GeometricProjectionPF(ParticleFilter):
             raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r}")
         if weighting not in WEIGHTINGS:
             raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
+        if metric not in METRICS:
+            raise ValueError(f"metric must be one of {METRICS}, got {metric!r}")
         if not float(regularization) > 0.0:
             raise ValueError(f"regularization must be positive, got {regularization}")
         self.reference = reference
         self.weighting = weighting
+        self.metric = metric
         self.regularization = float(regularization)
         self._previous_y = np.full(model.measurement_dim, np.nan)
         self._input = None
@@ -77,7 +90,8 @@ class GeometricProjectionPF(ParticleFilter):
             H = self.model.measurement_jacobian(states)[:, rows, :]
             eta = np.einsum("nkj,nj->nk", H, self.model.drift(states, self.time, self._input))
             r = self.model.residual(y, self._previous_y)[rows] - eta * dt
-        shift, a = project(H, r, self._whitener(rows), self.regularization)
+        metric_factor = self._noise_factors(dt)[0] if self.metric == "process_noise" else None
+        shift, a = project(H, r, self._whitener(rows), self.regularization, metric_factor)
         self._costate[:, rows] = a / dt
         correction = gaussian_shift_correction(shift, inverse_factor, z) if self.weighting == "corrected" else 0.0
         return shift, correction

@@ -5,8 +5,17 @@ For predicted particles ``x`` and a reference innovation ``r`` the projection is
     shift = H^T (H H^T + eps I)^-1 r,        co-state  lambda = (H H^T + eps I)^-1 r / dt,
 
 with ``H`` and ``r`` first whitened by the measurement noise (``W R W^T = I``), so measurement rows in
-metres and radians are commensurate, and ``eps`` taken relative to the mean eigenvalue of ``H H^T``, so
-it is dimensionless. This is the consistent form of Algorithm 1's projection line (``H^T lambda dt``).
+metres and radians are commensurate. This is the consistent form of Algorithm 1's projection line
+(``H^T lambda dt``).
+
+Two metrics for the state space:
+
+* Euclidean (the paper): ``eps`` is taken relative to the mean eigenvalue of ``H H^T`` (whose units mix
+  metres and radians), so it is dimensionless.
+* A metric ``M = L L^T`` (e.g. the process noise ``Q(dt)``): ``H`` becomes ``H L`` and the shift
+  ``M H^T (H M H^T + eps R)^-1 r`` after un-whitening. ``H M H^T`` is then dimensionless in whitened
+  coordinates and ``eps`` is absolute: with ``M = Q`` and ``eps = 1`` the shift is the Kalman-gain mean
+  of the locally optimal proposal, while ``eps -> 0`` enforces the measurement exactly.
 """
 from __future__ import annotations
 
@@ -15,21 +24,24 @@ import numpy as np
 from gpf_nav.linalg import solve_spd
 
 
-def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float
-            ) -> tuple[np.ndarray, np.ndarray]:
+def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float,
+            metric_factor: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Projection shift and whitened co-state increment.
 
     Args:
         H: measurement Jacobian of the measured rows ``(N, k, n)``.
         r: reference innovation of those rows ``(N, k)`` (angles already wrapped).
         W: whitener ``(k, k)`` of the rows' noise covariance.
-        regularization: relative Tikhonov ``eps`` (dimensionless).
+        regularization: Tikhonov ``eps``: relative for the Euclidean metric, absolute otherwise.
+        metric_factor: ``L`` ``(n, n)`` of the state metric ``L L^T``; None for the Euclidean metric.
 
     Returns:
         ``shift`` ``(n, N)`` to add to the particles and ``a = (Hw Hw^T + eps I)^-1 W r`` ``(N, k)``
         (the co-state times ``dt``, in whitened measurement coordinates).
     """
     Ht = H.transpose(1, 2, 0)  # (k, n, N)
+    if metric_factor is not None:
+        Ht = np.einsum("kjn,jc->kcn", Ht, metric_factor)
     columns = np.flatnonzero(Ht.any(axis=(0, 2)))  # state components the measurement depends on
     Hw = np.einsum("ij,jcn->icn", W, Ht[:, columns])
     rw = W @ r.T
@@ -37,11 +49,16 @@ def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float
     k = S.shape[0]
     trace = np.einsum("iin->n", S)
     # relative Tikhonov term; a zero Jacobian (degenerate geometry) gets unit damping and a zero shift
-    damping = np.where(trace > 0.0, regularization * trace / k, 1.0)
+    if metric_factor is None:
+        damping = np.where(trace > 0.0, regularization * trace / k, 1.0)
+    else:
+        damping = np.full_like(trace, regularization)
     for i in range(k):
         S[i, i] += damping
     a = solve_spd(S, rw)
     a[~np.isfinite(a)] = 0.0
     shift = np.zeros((H.shape[2], H.shape[0]))
     shift[columns] = np.einsum("icn,in->cn", Hw, a)
+    if metric_factor is not None:
+        shift = metric_factor @ shift
     return shift, a.T

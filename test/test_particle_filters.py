@@ -1,0 +1,148 @@
+"""Particle filters against the exact Kalman posterior, and their numerical safety on the lunar model."""
+import numpy as np
+import pytest
+
+from gpf_nav.filters import BootstrapPF, GeometricProjectionPF
+from gpf_nav.models import MOON_RADIUS, MU_MOON, LunarDescentModel
+from linear_reference import constant_velocity_model, kalman, simulate
+
+DT = 1.0
+PRIOR_MEAN = np.array([0.0, 1.0])
+PRIOR_COV = np.diag([4.0, 1.0])
+
+
+def final_errors(cls, n_particles, seeds, **options):
+    """Posterior mean and covariance errors against the Kalman filter after 10 steps, per seed."""
+    model = constant_velocity_model()
+    ys = simulate(model, PRIOR_MEAN, 10, DT, seed=123)
+    exact_mean, exact_cov = kalman(model, PRIOR_MEAN, PRIOR_COV, ys, DT)[-1]
+    mean_err, cov_err = [], []
+    for seed in seeds:
+        f = cls(model, n_particles=n_particles, seed=seed, **options)
+        f.initialize(PRIOR_MEAN, PRIOR_COV)
+        for y in ys:
+            f.predict(DT)
+            f.update(y)
+        mean_err.append(np.linalg.norm(f.mean - exact_mean) / np.sqrt(np.trace(exact_cov)))
+        cov_err.append(np.linalg.norm(f.covariance - exact_cov) / np.linalg.norm(exact_cov))
+    return np.sqrt(np.mean(np.square(mean_err))), np.sqrt(np.mean(np.square(cov_err)))
+
+
+EXACT_GPF = {"weighting": "corrected", "metric": "process_noise", "regularization": 1.0}
+
+
+@pytest.mark.parametrize("cls,options", [
+    (BootstrapPF, {}),
+    (GeometricProjectionPF, EXACT_GPF),
+    (GeometricProjectionPF, {**EXACT_GPF, "reference": "increment"}),
+])
+def test_posterior_converges_to_kalman(cls, options):
+    seeds = range(8)
+    small = final_errors(cls, 500, seeds, **options)
+    large = final_errors(cls, 8000, seeds, **options)
+    # 16x the particles: Monte Carlo error should shrink about 4x (N^-1/2); demand at least 2x
+    assert large[0] < small[0] / 2.0
+    assert large[1] < small[1] / 2.0
+    assert large[0] < 0.05 and large[1] < 0.1
+
+
+def test_likelihood_weighting_is_biased_but_corrected_is_not():
+    """The paper's weighting (likelihood only) does not target the posterior; the corrected one does."""
+    biased_mean, biased_cov = final_errors(GeometricProjectionPF, 8000, range(4), weighting="likelihood")
+    exact_mean, exact_cov = final_errors(GeometricProjectionPF, 8000, range(4), **EXACT_GPF)
+    assert biased_mean > 3 * exact_mean and biased_cov > 3 * exact_cov
+
+
+def test_euclidean_corrected_weights_are_exact_but_degenerate():
+    """The full Euclidean projection with exact weights: unbiased in principle, but its weights
+    collapse (position shifted without velocity), so it is far from the posterior at moderate N."""
+    euclid = final_errors(GeometricProjectionPF, 2000, range(4), weighting="corrected")
+    metric = final_errors(GeometricProjectionPF, 2000, range(4), **EXACT_GPF)
+    assert euclid[0] > 3 * metric[0]
+
+
+def test_partial_measurement_uses_only_measured_rows():
+    model = constant_velocity_model()
+    f = GeometricProjectionPF(model, n_particles=200, seed=0)
+    f.initialize(PRIOR_MEAN, PRIOR_COV)
+    f.predict(DT)
+    before = f.mean.copy()
+    f.update(np.array([np.nan]))  # nothing measured: weights unchanged, only the pending noise drawn
+    assert np.allclose(f.mean, before, atol=0.3)
+    assert np.all(f.costate == 0.0)
+
+
+def test_malformed_measurement_raises():
+    f = BootstrapPF(constant_velocity_model(), n_particles=10, seed=0)
+    f.initialize(PRIOR_MEAN, PRIOR_COV)
+    with pytest.raises(ValueError):
+        f.update(np.zeros(2))
+    with pytest.raises(ValueError):
+        f.predict(-1.0)
+
+
+@pytest.mark.parametrize("n, tau", [(0, 0.5), (10, 0.0), (10, 1.5)])
+def test_invalid_options_refused(n, tau):
+    with pytest.raises(ValueError):
+        BootstrapPF(constant_velocity_model(), n_particles=n, ess_threshold=tau)
+
+
+# --- lunar model ---------------------------------------------------------------------------------------
+def lunar_start():
+    r0 = MOON_RADIUS + 100e3
+    return np.array([r0, 0.0, 0.0, 0.0, np.sqrt(MU_MOON / r0), 0.0]), np.diag([1e6] * 3 + [1.0] * 3)
+
+
+def run_lunar(filter_, steps=20, mask=(True, True, True)):
+    model = filter_.model
+    truth = LunarDescentModel(mu_scale=1.09)
+    x, cov = lunar_start()
+    filter_.initialize(x, cov)
+    rng = np.random.default_rng(5)
+    state = x[None]
+    for _ in range(steps):
+        state = truth.transition(state, 2.0)
+        y = model.measure(state)[0] + rng.normal(size=3) * [30.0, 5e-4, 5e-4]
+        y[~np.asarray(mask)] = np.nan
+        filter_.predict(2.0)
+        filter_.update(y)
+    return state[0]
+
+
+@pytest.mark.parametrize("mask", [(True, False, False), (False, True, False), (True, False, True)])
+def test_rank_deficient_projection_stays_finite(mask):
+    f = GeometricProjectionPF(LunarDescentModel(), n_particles=300, seed=1)
+    run_lunar(f, mask=mask)
+    assert np.all(np.isfinite(f.mean)) and np.all(np.isfinite(f.covariance))
+    assert np.all(np.isfinite(f.costate))
+    assert np.all(f.costate[:, ~np.asarray(mask)] == 0.0)
+
+
+def test_gpf_tracks_lunar_truth():
+    f = GeometricProjectionPF(LunarDescentModel(), n_particles=500, seed=2)
+    truth = run_lunar(f, steps=50)
+    assert np.linalg.norm(f.mean[:3] - truth[:3]) < 5e3  # 0.03 deg angles ~ 1 km cross-track
+
+
+@pytest.mark.parametrize("cls,options", [(BootstrapPF, {}), (GeometricProjectionPF, {}),
+                                         (GeometricProjectionPF, {"weighting": "corrected"}),
+                                         (GeometricProjectionPF, EXACT_GPF),
+                                         (GeometricProjectionPF, {"reference": "increment"})])
+def test_same_seed_is_bit_identical(cls, options):
+    outputs = []
+    for _ in range(2):
+        f = cls(LunarDescentModel(), n_particles=300, seed=11, **options)
+        run_lunar(f, steps=10)
+        outputs.append((f.mean.copy(), f.covariance.copy(), f.weights.copy(), f.particles.copy()))
+    for a, b in zip(*outputs):
+        assert np.array_equal(a, b)
+
+
+def test_costate_statistics_are_consistent():
+    f = GeometricProjectionPF(LunarDescentModel(), n_particles=300, seed=3)
+    run_lunar(f, steps=5)
+    norms = np.linalg.norm(f.costate, axis=1)
+    assert f.costate_norm_max == pytest.approx(norms.max())
+    assert f.costate_norm_mean == pytest.approx(f.weights @ norms)
+    assert np.allclose(f.costate_mean, f.weights @ f.costate)
+    assert 0.0 < f.ess <= 1.0
