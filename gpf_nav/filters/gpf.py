@@ -91,7 +91,8 @@ class GeometricProjectionPF(ParticleFilter):
             eta = np.einsum("nkj,nj->nk", H, self.model.drift(states, self.time, self._input))
             r = self.model.residual(y, self._previous_y)[rows] - eta * dt
         metric_factor = self._noise_factors(dt)[0] if self.metric == "process_noise" else None
-        shift, a = project(H, r, self._whitener(rows), self.regularization, metric_factor)
+        shift, a = project(H, r, self._whitener(rows), self.regularization, metric_factor,
+                           self.model.measured_state_index)
         self._costate[:, rows] = a / dt
         correction = gaussian_shift_correction(shift, inverse_factor, z) if self.weighting == "corrected" else 0.0
         return shift, correction

@@ -250,7 +250,9 @@ class BootstrapPF(ParticleFilter):
         if self.compute_costate and dt > 0.0 and rows.any():
             H, r = self._innovation(x_pred.T, y, rows)
             self._costate = np.zeros_like(self._costate)
-            self._costate[:, rows] = project(H, r, self._whitener(rows), self.regularization)[1] / dt
+            a = project(H, r, self._whitener(rows), self.regularization,
+                        columns=self.model.measured_state_index)[1]
+            self._costate[:, rows] = a / dt
         return None, 0.0
 
 

@@ -25,7 +25,8 @@ from gpf_nav.linalg import solve_spd
 
 
 def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float,
-            metric_factor: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+            metric_factor: np.ndarray | None = None, columns: tuple[int, ...] | None = None
+            ) -> tuple[np.ndarray, np.ndarray]:
     """Projection shift and whitened co-state increment.
 
     Args:
@@ -34,6 +35,7 @@ def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float,
         W: whitener ``(k, k)`` of the rows' noise covariance.
         regularization: Tikhonov ``eps``: relative for the Euclidean metric, absolute otherwise.
         metric_factor: ``L`` ``(n, n)`` of the state metric ``L L^T``; None for the Euclidean metric.
+        columns: the state components ``h`` depends on (other columns of ``H`` are zero); None: all.
 
     Returns:
         ``shift`` ``(n, N)`` to add to the particles and ``a = (Hw Hw^T + eps I)^-1 W r`` ``(N, k)``
@@ -42,8 +44,14 @@ def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float,
     Ht = H.transpose(1, 2, 0)  # (k, n, N)
     if metric_factor is not None:
         Ht = np.einsum("kjn,jc->kcn", Ht, metric_factor)
-    columns = np.flatnonzero(Ht.any(axis=(0, 2)))  # state components the measurement depends on
-    Hw = np.einsum("ij,jcn->icn", W, Ht[:, columns])
+        columns = None
+    columns = _as_index(range(H.shape[2]) if columns is None else columns)
+    Ht = Ht[:, columns]
+    diagonal = np.diag(W)
+    if np.count_nonzero(W) == np.count_nonzero(diagonal):
+        Hw = Ht * diagonal[:, None, None]
+    else:
+        Hw = np.einsum("ij,jcn->icn", W, Ht)
     rw = W @ r.T
     S = np.einsum("icn,jcn->ijn", Hw, Hw)
     k = S.shape[0]
@@ -62,3 +70,11 @@ def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float,
     if metric_factor is not None:
         shift = metric_factor @ shift
     return shift, a.T
+
+
+def _as_index(columns) -> slice | list[int]:
+    """A slice (a view, no copy) when ``columns`` are consecutive, else the list of indices."""
+    columns = list(columns)
+    if columns == list(range(columns[0], columns[-1] + 1)):
+        return slice(columns[0], columns[-1] + 1)
+    return columns

@@ -34,6 +34,8 @@ class StateSpaceModel(ABC):
         position_index: indices of the state components that are a position (used by ROS adapters and
             metrics; may be empty).
         velocity_index: indices of the velocity components (may be empty).
+        measured_state_index: indices of the state components ``h`` depends on (the other columns of
+            ``H`` are zero); None means all. Lets the projection skip structural zeros.
     """
 
     state_dim: int
@@ -41,6 +43,7 @@ class StateSpaceModel(ABC):
     angular: np.ndarray
     position_index: tuple[int, ...] = ()
     velocity_index: tuple[int, ...] = ()
+    measured_state_index: tuple[int, ...] | None = None
 
     @abstractmethod
     def drift(self, x: np.ndarray, t: float = 0.0, u: np.ndarray | None = None) -> np.ndarray:
@@ -82,8 +85,8 @@ class StateSpaceModel(ABC):
         Shapes broadcast: ``(m,)`` against ``(N, m)`` gives ``(N, m)``.
         """
         r = np.asarray(y, dtype=float) - y_pred
-        if self.angular.any():
-            r[..., self.angular] = wrap_angle(r[..., self.angular])
+        for i in np.flatnonzero(self.angular):
+            r[..., i] = wrap_angle(r[..., i])
         return r
 
     def measurement_mean(self, y: np.ndarray, weights: np.ndarray) -> np.ndarray:
