@@ -25,6 +25,10 @@ class Filter(ABC):
         self.rng = np.random.default_rng(seed)
         self.time = 0.0
         self.initialized = False
+        self.recoveries = 0
+        self.last_recovery_reason: str | None = None
+        self.recovery_inflation = 10.0
+        self._last_good: tuple[np.ndarray, np.ndarray] | None = None
 
     @abstractmethod
     def initialize(self, mean: np.ndarray, cov: np.ndarray) -> None:
@@ -47,6 +51,24 @@ class Filter(ABC):
     @abstractmethod
     def covariance(self) -> np.ndarray:
         """Posterior covariance ``(n, n)``."""
+
+    # --- recovery ----------------------------------------------------------------------------------------
+    def _remember(self, mean: np.ndarray, cov: np.ndarray) -> None:
+        """Keep ``(mean, cov)`` as the last good estimate, if it is finite."""
+        if np.all(np.isfinite(mean)) and np.all(np.isfinite(cov)):
+            self._last_good = (np.array(mean, dtype=float), np.array(cov, dtype=float))
+
+    def _recover(self, reason: str) -> None:
+        """Re-initialise from the last good estimate with its covariance times ``recovery_inflation``.
+
+        Counted in :attr:`recoveries`; :attr:`last_recovery_reason` says why. Filter time is kept.
+        """
+        self.recoveries += 1
+        self.last_recovery_reason = reason
+        mean, cov = self._last_good
+        time = self.time
+        self.initialize(mean, self.recovery_inflation * cov)
+        self.time = time
 
     # --- helpers shared by the filters ---------------------------------------------------------------
     def _check_prior(self, mean, cov) -> tuple[np.ndarray, np.ndarray]:

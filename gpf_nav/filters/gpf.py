@@ -51,13 +51,14 @@ class GeometricProjectionPF(ParticleFilter):
         resampling: resampling scheme name.
         ess_threshold: tau in (0, 1].
         seed: seed of the filter's random generator.
+        collapse_steps: see :class:`ParticleFilter`.
     """
 
     def __init__(self, model: StateSpaceModel, n_particles: int = 500, reference: str = "innovation",
                  weighting: str = "likelihood", metric: str = "euclidean", regularization: float = 1e-6,
                  resampling: str = "systematic", ess_threshold: float = 0.5,
-                 seed: int | np.random.Generator | None = None):
-        super().__init__(model, n_particles, resampling, ess_threshold, seed)
+                 seed: int | np.random.Generator | None = None, collapse_steps: int = 0):
+        super().__init__(model, n_particles, resampling, ess_threshold, seed, collapse_steps)
         if reference not in REFERENCES:
             raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r}")
         if weighting not in WEIGHTINGS:

@@ -24,6 +24,10 @@ from gpf_nav.linalg import cholesky_or_none, psd_sqrt
 from gpf_nav.models.base import StateSpaceModel
 
 
+_REMEMBER_EVERY = 10
+"""Updates between two snapshots of the last good estimate (a weighted covariance costs O(N n^2))."""
+
+
 class ParticleFilter(Filter):
     """SMC loop with a pluggable proposal (the bootstrap proposal by default).
 
@@ -33,11 +37,19 @@ class ParticleFilter(Filter):
         resampling: ``systematic`` (default), ``stratified``, ``residual`` or ``multinomial``.
         ess_threshold: tau in (0, 1]; resample when ESS < tau N.
         seed: seed of the filter's random generator.
+        collapse_steps: re-initialise (see :meth:`Filter._recover`) after this many consecutive
+            updates with an ESS below 1.5 particles; 0 (default) never does.
     """
 
     def __init__(self, model: StateSpaceModel, n_particles: int = 500, resampling: str = "systematic",
-                 ess_threshold: float = 0.5, seed: int | np.random.Generator | None = None):
+                 ess_threshold: float = 0.5, seed: int | np.random.Generator | None = None,
+                 collapse_steps: int = 0):
         super().__init__(model, seed)
+        if int(collapse_steps) < 0:
+            raise ValueError(f"collapse_steps must be non-negative, got {collapse_steps}")
+        self.collapse_steps = int(collapse_steps)
+        self._collapsed_for = 0
+        self._updates = 0
         if int(n_particles) < 1:
             raise ValueError(f"n_particles must be positive, got {n_particles}")
         if not 0.0 < float(ess_threshold) <= 1.0:
@@ -67,6 +79,8 @@ class ParticleFilter(Filter):
         self._x = np.ascontiguousarray(mean[:, None] + psd_sqrt(cov) @ z)
         self._set_uniform_weights()
         self._pending_dt = 0.0
+        self._collapsed_for = 0
+        self._remember(mean, cov)
         self.initialized = True
 
     @property
@@ -127,6 +141,7 @@ class ParticleFilter(Filter):
         self._x = np.ascontiguousarray(self.model.transition(self._x.T, dt, self.time, u).T)
         self._pending_dt += dt
         self.time += dt
+        self._discard_non_finite()
 
     def update(self, y):
         y, rows = self._check_measurement(y)
@@ -145,8 +160,52 @@ class ParticleFilter(Filter):
         increment = log_correction
         if rows.any():
             increment = increment + self._log_likelihood(x, y, rows)
-        self._reweight(increment)
+        if not self._discard_non_finite():
+            return
+        if not self._reweight(increment):
+            self._recover("every particle weight is zero or NaN")
+            return
         self._after_update(y, rows)
+        self._check_collapse()
+        self._updates += 1
+        if self._updates % _REMEMBER_EVERY == 0:
+            self._remember(self.mean, self.covariance)
+
+    def _discard_non_finite(self) -> bool:
+        """Give non-finite particles zero weight (and a finite placeholder state); recover when none
+        is left. Returns False when the filter had to re-initialise."""
+        bad = ~np.isfinite(self._x).all(axis=0)
+        if not bad.any():
+            return True
+        if bad.all():
+            self._recover("every particle became non-finite")
+            return False
+        self._x[:, bad] = self._x[:, np.flatnonzero(~bad)[0]][:, None]
+        logw = self._logw.copy()
+        logw[bad] = -np.inf
+        if self._normalise(logw) is None:
+            self._recover("every particle with weight became non-finite")
+            return False
+        return True
+
+    def _normalise(self, logw: np.ndarray) -> float | None:
+        """Set the weights from unnormalised log-weights ``(N,)`` (NaN counts as zero weight) and
+        return their log-sum-exp; None, changing nothing, when every weight is zero or NaN."""
+        logw[np.isnan(logw)] = -np.inf
+        peak = logw.max()
+        if not -np.inf < peak < np.inf:
+            return None
+        total = peak + np.log(np.exp(logw - peak).sum())
+        self._logw = logw - total
+        self._weights = np.exp(self._logw)
+        return float(total)
+
+    def _check_collapse(self) -> None:
+        if not self.collapse_steps:
+            return
+        self._collapsed_for = self._collapsed_for + 1 if self.ess * self.n_particles < 1.5 else 0
+        if self._collapsed_for >= self.collapse_steps:
+            self._recover(f"ESS below 1.5 particles for {self.collapse_steps} updates")
 
     def _noise_factors(self, dt: float) -> tuple[np.ndarray, np.ndarray | None]:
         """``(L, L^-1)`` with ``L L^T = Q(dt)``; ``L^-1`` is None when ``Q`` is not positive definite.
@@ -197,20 +256,15 @@ class ParticleFilter(Filter):
         log_det = -np.log(np.diag(w)).sum()
         return -0.5 * np.einsum("ij,ij->i", ew, ew) - log_det - 0.5 * rows.sum() * np.log(2.0 * np.pi)
 
-    def _reweight(self, increment) -> None:
-        logw = self._logw + increment
-        logw = np.where(np.isnan(logw), -np.inf, logw)
-        peak = logw.max()
-        total = peak + np.log(np.exp(logw - peak).sum()) if np.isfinite(peak) else peak
+    def _reweight(self, increment) -> bool:
+        """Add the log-weight increment ``(N,)``, normalise, resample below ``tau N``.
+
+        Returns False (and changes nothing) when every new weight is zero or NaN."""
         self.resampled = False
-        if not np.isfinite(total):
-            # every particle is incompatible with the measurement: keep the prior weights, say so
-            self.log_likelihood = -np.inf
-            self.ess = float(resamplers.effective_sample_size(self._weights)) / self.n_particles
-            return
-        self.log_likelihood = float(total)  # previous log-weights are normalised
-        self._logw = logw - total
-        self._weights = np.exp(self._logw)
+        total = self._normalise(self._logw + increment)
+        if total is None:
+            return False
+        self.log_likelihood = total  # previous log-weights are normalised
         self.ess = resamplers.effective_sample_size(self._weights) / self.n_particles
         if self.ess < self.ess_threshold:
             ancestors = self._resample(self._weights, self.rng)
@@ -219,6 +273,7 @@ class ParticleFilter(Filter):
             self._set_uniform_weights()
             self.resampled = True
             self.resample_count += 1
+        return True
 
     def _on_resample(self, ancestors: np.ndarray) -> None:
         """Per-particle quantities follow their ancestors."""
@@ -241,8 +296,8 @@ class BootstrapPF(ParticleFilter):
 
     def __init__(self, model: StateSpaceModel, n_particles: int = 500, resampling: str = "systematic",
                  ess_threshold: float = 0.5, seed: int | np.random.Generator | None = None,
-                 compute_costate: bool = False, regularization: float = 1e-6):
-        super().__init__(model, n_particles, resampling, ess_threshold, seed)
+                 compute_costate: bool = False, regularization: float = 1e-6, collapse_steps: int = 0):
+        super().__init__(model, n_particles, resampling, ess_threshold, seed, collapse_steps)
         self.compute_costate = bool(compute_costate)
         self.regularization = float(regularization)
 
