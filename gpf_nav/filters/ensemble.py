@@ -1,0 +1,105 @@
+"""Stochastic ensemble Kalman filter (perturbed observations) on any :class:`StateSpaceModel`."""
+from __future__ import annotations
+
+import numpy as np
+
+from gpf_nav.filters.base import Filter
+from gpf_nav.filters.kalman import ModelNoise, innovation_solve, readonly_view
+from gpf_nav.linalg import psd_sqrt
+from gpf_nav.models.base import StateSpaceModel
+
+
+class EnsembleKF(Filter):
+    """Stochastic EnKF: members ``X`` ``(N, n)`` moved by a gain built from ensemble anomalies.
+
+    Predict: one batched ``model.transition`` of all members plus ``N(0, Q(dt))`` samples. Update on
+    the measured rows: predicted-measurement anomalies are ``model.residual(h(X), h_mean)`` with
+    ``h_mean = model.measurement_mean`` (angles wrapped about their circular mean), the gain solves
+    ``Pyy K^T = Pxy^T`` and each member is moved by its own perturbed innovation
+    ``residual(y, h(x_i)) + e_i``, ``e_i ~ N(0, R)`` drawn from ``self.rng``.
+
+    Args:
+        model: the state-space model.
+        n_particles: ensemble size ``N >= 2``.
+        seed: seed (or generator) of the filter's random stream; same seed, same output.
+
+    Attributes:
+        last_log_likelihood: ``log N(r; 0, Pyy)`` of the ensemble-mean innovation ``r`` over the measured
+            rows at the last update; 0.0 when nothing was measured.
+    """
+
+    def __init__(self, model: StateSpaceModel, n_particles: int = 500,
+                 seed: int | np.random.Generator | None = None):
+        if int(n_particles) < 2:
+            raise ValueError(f"n_particles must be at least 2, got {n_particles}")
+        super().__init__(model, seed)
+        self.n_particles = int(n_particles)
+        self._X = np.zeros((self.n_particles, model.state_dim))
+        self._weights = np.full(self.n_particles, 1.0 / self.n_particles)
+        self._noise = ModelNoise(model)
+        self.last_log_likelihood = 0.0
+
+    def initialize(self, mean: np.ndarray, cov: np.ndarray) -> None:
+        """Draw the ``N`` members from ``N(mean (n,), cov (n, n))``."""
+        mean, cov = self._check_prior(mean, cov)
+        z = self.rng.standard_normal(self._X.shape)
+        self._X = mean + z @ psd_sqrt(cov).T
+        self.last_log_likelihood = 0.0
+        self.initialized = True
+
+    def predict(self, dt: float, u: np.ndarray | None = None) -> None:
+        """Move every member through ``model.transition`` and add process noise; ``dt == 0`` is a no-op."""
+        self._require_initialized()
+        dt = self._check_dt(dt)
+        if dt == 0.0:
+            return
+        X = self.model.transition(self._X, dt, self.time, u)
+        self._X = X + self.rng.standard_normal(X.shape) @ self._noise.process_sqrt(dt).T
+        self.time += dt
+
+    def update(self, y: np.ndarray) -> None:
+        """Condition on ``y`` ``(m,)``; NaN rows are not measured, an all-NaN ``y`` is a no-op."""
+        self._require_initialized()
+        y, mask = self._check_measurement(y)
+        k = np.count_nonzero(mask)
+        if k == 0:
+            self.last_log_likelihood = 0.0
+            return
+        model, X = self.model, self._X
+        HX = model.measure(X)
+        h_mean = model.measurement_mean(HX, self._weights)
+        # One residual call gives the anomalies Ay (N, m) of the predicted measurements and, in its last
+        # row, the ensemble-mean innovation r (m,).
+        deviations = model.residual(np.vstack((HX, y)), h_mean)
+        Ay, r = deviations[:-1], deviations[-1]
+        innovations = model.residual(y, HX)  # (N, m)
+        if k < mask.shape[0]:
+            Ay, innovations, r = Ay[:, mask], innovations[:, mask], r[mask]
+        Ax = X - self._weights @ X
+        scale = 1.0 / (self.n_particles - 1)
+        Pyy = (Ay.T @ Ay) * scale + self._noise.measurement(mask)
+        Pxy_t = (Ay.T @ Ax) * scale  # (k, n)
+        Kt, _, self.last_log_likelihood = innovation_solve(Pyy, Pxy_t, r)
+        innovations += self.rng.standard_normal(innovations.shape) @ self._noise.measurement_sqrt(mask).T
+        self._X = X + innovations @ Kt
+
+    @property
+    def particles(self) -> np.ndarray:
+        """Ensemble members ``(N, n)``, read-only view."""
+        return readonly_view(self._X)
+
+    @property
+    def mean(self) -> np.ndarray:
+        """Ensemble mean ``(n,)``."""
+        return readonly_view(self._weights @ self._X)
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """Unbiased ensemble covariance ``(n, n)``."""
+        A = self._X - self._weights @ self._X
+        P = (A.T @ A) / (self.n_particles - 1)
+        return readonly_view(0.5 * (P + P.T))
+
+    def _require_initialized(self) -> None:
+        if not self.initialized:
+            raise RuntimeError("EnsembleKF: call initialize() before predict() or update()")
