@@ -32,6 +32,8 @@ setup(
     entry_points={
         "console_scripts": [
             "gpf-nav = gpf_nav.cli:main",
+            "estimator = gpf_nav.ros.estimator_node:main",
+            "simulator = gpf_nav.ros.simulator_node:main",
         ],
     },
 )

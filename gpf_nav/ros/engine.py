@@ -1,0 +1,326 @@
+"""The estimator's logic without ROS: timing, initialisation, IMU input, recovery, counters.
+
+:class:`EstimatorEngine` is what ``estimator_node`` drives; the node only converts messages, applies
+the message-level checks of :mod:`gpf_nav.ros.validation` and publishes. Times are integer nanoseconds
+of ROS time. Rules:
+
+* A measurement at stamp ``t`` runs ``predict((t - t_filter) s, u)`` then ``update(y)``, ``u`` being the
+  world-frame specific force of the latest IMU message stamped strictly before ``t`` (zero-order hold;
+  none when there is no such sample within ``imu_timeout`` s before ``t``). Stamps older than the last processed measurement are
+  refused (``stale_stamp``), more than ``max_future`` s ahead of the node clock too (``future_stamp``).
+* Initialisation, first match wins: the ``initial_state`` parameter (at ``initial_stamp``, or at the
+  first measurement when that is negative); a ``set_pose`` message; else the first ``init_window``
+  measurements through :func:`gpf_nav.ros.initialization.batch_initial_state`.
+* Predictions between measurements (:meth:`extrapolate`) run on a copy of the filter, so they never
+  move the filter's own time: a measurement that arrives late (but newer than the last one) is used.
+* If the filter raises or its mean/covariance become non-finite, it is rebuilt from the last good
+  estimate (covariance inflated), predicted to the failing stamp, and the event is counted
+  (``reinit_count``; diagnostics go to ERROR for ``reinit_hold`` s).
+"""
+from __future__ import annotations
+
+import copy
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from gpf_nav.ros.initialization import batch_initial_state
+from gpf_nav.ros.validation import Counters, RateLimiter, check_timing
+
+NS = 1_000_000_000
+
+
+@dataclass
+class EngineConfig:
+    """Engine settings (node parameters; units in the field comments)."""
+
+    max_future: float = 1.0                 # s, refuse stamps further ahead of the node clock
+    imu_timeout: float = 1.0                # s, an IMU sample older than this is not used
+    init_window: int = 10                   # measurements buffered for the batch initialisation
+    initial_state: np.ndarray | None = None  # (n,) m, m/s; None: not given
+    initial_std: np.ndarray = field(default_factory=lambda: np.array([1e3, 1e3, 1e3, 1.0, 1.0, 1.0]))
+    initial_stamp: float = -1.0             # s of ROS time; < 0: the first measurement's stamp
+    max_measurement_rate: float = 0.0       # messages per second (steady clock); <= 0: unlimited
+    max_extrapolation: float = 300.0        # s, predictions are not published further than this
+    reinit_inflation: float = 4.0           # covariance factor when re-initialising after a failure
+    reinit_hold: float = 10.0               # s (steady clock) the ERROR level is held after it
+
+
+class EstimatorEngine:
+    """Runs one core filter on stamped inputs. See the module docstring for the rules.
+
+    Args:
+        factory: builds a fresh, uninitialised filter (called at start, on reset and on recovery).
+        model: the filter's model (``state_dim``, ``position_index``, ...).
+        config: :class:`EngineConfig`.
+        monotonic: steady clock [s] used by the rate limiter and the ERROR hold.
+    """
+
+    def __init__(self, factory: Callable[[], object], model, config: EngineConfig,
+                 monotonic: Callable[[], float] = time.monotonic):
+        self.factory = factory
+        self.model = model
+        self.config = config
+        self.monotonic = monotonic
+        self.counters = Counters()
+        self.reinit_count = 0
+        self.last_reinit_reason = ""
+        self._last_reinit_time = -np.inf
+        self._rate = RateLimiter(config.max_measurement_rate)
+        self.reset()
+
+    # --- state -----------------------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Back to the start-up state (counters are kept; they are cumulative)."""
+        self.filter = self.factory()
+        self.t_ns: int | None = None          # ROS time of the filter state
+        self.last_measurement_ns: int | None = None
+        self.last_update_ns: int | None = None
+        self.mean: np.ndarray | None = None
+        self.cov: np.ndarray | None = None
+        self.version = 0                      # bumps at every change of the filter state
+        self._good: tuple[np.ndarray, np.ndarray, int] | None = None
+        self._imu: deque[tuple[int, np.ndarray]] = deque(maxlen=256)
+        self._init_buffer: list[tuple[int, np.ndarray]] = []
+        self._shadow = None
+        self._shadow_version = -1
+        self._shadow_ns = None
+        self.init_source = ""
+        cfg = self.config
+        if cfg.initial_state is not None and cfg.initial_stamp >= 0.0:
+            self._initialize(cfg.initial_state, np.diag(cfg.initial_std ** 2),
+                             int(round(cfg.initial_stamp * 1e9)), "parameters")
+
+    @property
+    def initialized(self) -> bool:
+        return self.t_ns is not None
+
+    @property
+    def in_error(self) -> bool:
+        """True for ``reinit_hold`` s after a re-initialisation."""
+        return self.monotonic() - self._last_reinit_time < self.config.reinit_hold
+
+    def _initialize(self, mean, cov, t_ns: int, source: str) -> None:
+        self.filter = self.factory()
+        self.filter.initialize(mean, cov)
+        self.t_ns = int(t_ns)
+        self.init_source = source
+        self._init_buffer = []
+        self._store(t_ns)
+
+    def _store(self, t_ns: int) -> bool:
+        """Cache mean/covariance at ``t_ns``; False (and nothing stored) when they are not finite."""
+        mean = np.array(self.filter.mean, dtype=float)
+        cov = np.array(self.filter.covariance, dtype=float)
+        if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
+            return False
+        self.mean, self.cov = mean, cov
+        self._good = (mean, cov, int(t_ns))
+        self.version += 1
+        return True
+
+    # --- inputs ----------------------------------------------------------------------------------------
+    def measurement(self, stamp_ns: int, y: np.ndarray, now_ns: int | None,
+                    stream: str = "rae") -> tuple[bool, str]:
+        """Use measurement ``y`` ``(m,)`` (NaN = not measured) taken at ``stamp_ns``.
+
+        Returns ``(True, "")`` when the filter was updated (``mean``/``cov`` are then at ``stamp_ns``),
+        ``(True, "buffered")`` when it was kept for the initialisation, else ``(False, reason)``; the
+        counters are updated either way.
+        """
+        ok, reason = check_timing(stamp_ns, self.last_measurement_ns, now_ns,
+                                  int(self.config.max_future * NS))
+        if ok and self.t_ns is not None and stamp_ns < self.t_ns:
+            ok, reason = False, "stale_stamp"  # older than the initial state (or a set_pose)
+        if ok and not self._rate.allow(self.monotonic()):
+            ok, reason = False, "rate_limit"
+        if not ok:
+            self.counters.reject(stream, reason)
+            return False, reason
+        y = np.asarray(y, dtype=float)
+        self.counters.masked += int(np.sum(~np.isfinite(y)))
+        self.last_measurement_ns = stamp_ns
+        if not self.initialized:
+            if self.config.initial_state is not None:
+                self._initialize(self.config.initial_state, np.diag(self.config.initial_std ** 2),
+                                 stamp_ns, "parameters")
+            else:
+                return self._buffer(stamp_ns, y, stream)
+        try:
+            self._predict_to(stamp_ns)
+            self.filter.update(y)
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError) as err:
+            self._recover(stamp_ns, f"filter raised {type(err).__name__}: {err}")
+            self.counters.reject(stream, "filter_error")
+            return False, "filter_error"
+        if not self._store(stamp_ns):
+            self._recover(stamp_ns, "non-finite mean or covariance after the update")
+            self.counters.reject(stream, "filter_error")
+            return False, "filter_error"
+        self.last_update_ns = stamp_ns
+        self.counters.accept(stream)
+        return True, ""
+
+    def _buffer(self, stamp_ns: int, y: np.ndarray, stream: str) -> tuple[bool, str]:
+        self._init_buffer.append((stamp_ns, y))
+        self.counters.accept(stream)
+        window = max(2, int(self.config.init_window))
+        if len(self._init_buffer) < window:
+            return True, "buffered"
+        times = np.array([t for t, _ in self._init_buffer], dtype=np.int64)
+        ys = np.array([v for _, v in self._init_buffer])
+        seconds = (times - times[0]) * 1e-9
+        fit = None
+        if seconds[-1] > 0.0:
+            try:
+                fit = batch_initial_state(self.model, seconds, ys)
+            except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+                fit = None
+        if fit is None:
+            self._init_buffer = self._init_buffer[-(window - 1):]  # slide the window
+            return True, "buffered"
+        self._initialize(fit[0], fit[1], stamp_ns, "measurements")
+        self.last_update_ns = stamp_ns
+        return True, ""
+
+    def imu(self, stamp_ns: int, specific_force_world: np.ndarray, now_ns: int | None) -> tuple[bool, str]:
+        """Hold a world-frame specific force ``(3,)`` [m/s^2] from ``stamp_ns`` on."""
+        last = self._imu[-1][0] if self._imu else None
+        ok, reason = check_timing(stamp_ns, last, now_ns, int(self.config.max_future * NS))
+        if not ok:
+            self.counters.reject("imu", reason)
+            return False, reason
+        self._imu.append((stamp_ns, np.asarray(specific_force_world, dtype=float).copy()))
+        self.counters.accept("imu")
+        return True, ""
+
+    def set_pose(self, stamp_ns: int, position: np.ndarray, position_cov: np.ndarray | None,
+                 now_ns: int | None) -> tuple[bool, str]:
+        """(Re-)initialise at ``stamp_ns`` with the given position; velocity from the current estimate,
+        else from the ``initial_state`` parameter. ``position_cov`` None: ``initial_std``'s."""
+        ok, reason = check_timing(stamp_ns, self.last_measurement_ns, now_ns,
+                                  int(self.config.max_future * NS))
+        if not ok:
+            self.counters.reject("set_pose", reason)
+            return False, reason
+        n = self.model.state_dim
+        p, v = list(self.model.position_index), list(self.model.velocity_index)
+        mean = np.zeros(n)
+        cov = np.diag(self.config.initial_std ** 2)
+        if self.initialized and self.mean is not None:
+            if stamp_ns >= self.t_ns:
+                est = self.extrapolate(stamp_ns, force=True)
+                est_mean, est_cov = est if est is not None else (self.mean, self.cov)
+            else:
+                est_mean, est_cov = self.mean, self.cov
+            mean[v] = est_mean[v]
+            cov[np.ix_(v, v)] = est_cov[np.ix_(v, v)]
+        elif self.config.initial_state is not None:
+            mean[v] = np.asarray(self.config.initial_state)[v]
+        else:
+            self.counters.reject("set_pose", "no_velocity")
+            return False, "no_velocity"
+        mean[p] = position
+        if position_cov is not None:
+            cov[np.ix_(p, p)] = position_cov
+        try:
+            self._initialize(mean, cov, stamp_ns, "set_pose")
+        except ValueError:
+            self.counters.reject("set_pose", "non_finite")
+            return False, "non_finite"
+        self.last_measurement_ns = max(stamp_ns, self.last_measurement_ns or 0)
+        self.counters.accept("set_pose")
+        return True, ""
+
+    def _input_at(self, stamp_ns: int) -> np.ndarray | None:
+        for t, u in reversed(self._imu):
+            if t < stamp_ns:
+                return u if (stamp_ns - t) * 1e-9 <= self.config.imu_timeout else None
+        return None
+
+    def _predict_to(self, stamp_ns: int) -> None:
+        dt = (stamp_ns - self.t_ns) * 1e-9
+        if dt > 0.0:
+            self.filter.predict(dt, self._input_at(stamp_ns))
+        self.t_ns = stamp_ns
+
+    # --- outputs ---------------------------------------------------------------------------------------
+    def extrapolate(self, now_ns: int, force: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
+        """Predicted ``(mean, cov)`` at ``now_ns`` from a copy of the filter (the filter is untouched).
+
+        None when not initialised, ``now_ns`` is not after the filter time, the horizon exceeds
+        ``max_extrapolation`` (unless ``force``) or the prediction is not finite.
+        """
+        if not self.initialized or now_ns <= self.t_ns:
+            return None
+        if not force and (now_ns - self.t_ns) * 1e-9 > self.config.max_extrapolation:
+            return None
+        if self._shadow is None or self._shadow_version != self.version or now_ns < self._shadow_ns:
+            self._shadow = copy.deepcopy(self.filter)
+            self._shadow_version = self.version
+            self._shadow_ns = self.t_ns
+        try:
+            dt = (now_ns - self._shadow_ns) * 1e-9
+            if dt > 0.0:
+                self._shadow.predict(dt, self._input_at(now_ns))
+                self._shadow_ns = now_ns
+            mean = np.array(self._shadow.mean, dtype=float)
+            cov = np.array(self._shadow.covariance, dtype=float)
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+            self._shadow = None
+            return None
+        if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
+            self._shadow = None
+            return None
+        return mean, cov
+
+    # --- recovery --------------------------------------------------------------------------------------
+    def _recover(self, stamp_ns: int, why: str) -> None:
+        """Rebuild the filter from the last good estimate and predict it to ``stamp_ns``."""
+        self.reinit_count += 1
+        self.last_reinit_reason = why
+        self._last_reinit_time = self.monotonic()
+        self._shadow = None
+        if self._good is None:
+            self.reset()
+            return
+        mean, cov, t_ns = self._good
+        try:
+            self._initialize(mean, self.config.reinit_inflation * cov, t_ns, "recovery")
+            self._predict_to(stamp_ns)
+            if not self._store(stamp_ns):
+                raise FloatingPointError("prediction from the last good estimate is not finite")
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+            good = self._good
+            self.reset()
+            self._good = good
+
+    # --- summaries -------------------------------------------------------------------------------------
+    def measurement_age(self, now_ns: int | None) -> float | None:
+        """Seconds from the last accepted measurement's stamp to ``now_ns`` (None if none yet)."""
+        if self.last_measurement_ns is None or not now_ns:
+            return None
+        return (now_ns - self.last_measurement_ns) * 1e-9
+
+    def filter_stats(self) -> dict:
+        """ESS/N and co-state figures of a particle filter (keys absent for other filters)."""
+        f = self.filter
+        out = {}
+        if not self.initialized:
+            return out
+        if hasattr(f, "ess"):
+            out["ess"] = float(f.ess)
+            out["resample_count"] = int(f.resample_count)
+        if self.has_costate:
+            out["costate_norm_mean"] = float(f.costate_norm_mean)
+            out["costate_norm_max"] = float(f.costate_norm_max)
+        return out
+
+    @property
+    def has_costate(self) -> bool:
+        """True when the filter computes a geometric co-state (the GPF; the SPF with compute_costate)."""
+        f = self.filter
+        return hasattr(f, "costate_mean") and (not hasattr(f, "compute_costate") or bool(f.compute_costate))

@@ -1,0 +1,124 @@
+"""Filter construction from node parameters: ``make_filter(name, model, **options)``.
+
+Maps the estimator's parameter names to the core constructors' arguments and refuses invalid values
+with a message that names the parameter. No rclpy here.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from gpf_nav.models.lunar import LunarDescentModel
+
+FILTERS = ("gpf", "spf", "ekf", "ukf", "enkf")
+PARTICLE_FILTERS = ("gpf", "spf")
+
+
+def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 0,
+                reference: str = "innovation", weighting: str = "likelihood",
+                regularization: float = 1e-6, resampling: str = "systematic",
+                ess_threshold: float = 0.5, compute_costate: bool = True,
+                ukf_alpha: float = 1e-3, ukf_beta: float = 2.0, ukf_kappa: float = 0.0):
+    """Build the filter called ``name`` (one of :data:`FILTERS`) on ``model``.
+
+    ``seed < 0`` (or None) draws a random seed. Options a filter does not use are ignored (for example
+    ``n_particles`` for the EKF). Raises ValueError naming the offending parameter.
+    """
+    errors = check_filter_options(name, n_particles=n_particles, reference=reference,
+                                  weighting=weighting, regularization=regularization,
+                                  resampling=resampling, ess_threshold=ess_threshold,
+                                  ukf_alpha=ukf_alpha, ukf_kappa=ukf_kappa,
+                                  state_dim=model.state_dim)
+    if errors:
+        raise ValueError("; ".join(errors))
+    seed = None if seed is None or int(seed) < 0 else int(seed)
+    if name == "gpf":
+        from gpf_nav.filters import GeometricProjectionPF
+        return GeometricProjectionPF(model, int(n_particles), reference=reference, weighting=weighting,
+                                     regularization=regularization, resampling=resampling,
+                                     ess_threshold=ess_threshold, seed=seed)
+    if name == "spf":
+        from gpf_nav.filters import BootstrapPF
+        return BootstrapPF(model, int(n_particles), resampling=resampling, ess_threshold=ess_threshold,
+                           seed=seed, compute_costate=bool(compute_costate),
+                           regularization=regularization)
+    cls = _core_class({"ekf": "ExtendedKF", "ukf": "UnscentedKF", "enkf": "EnsembleKF"}[name])
+    if name == "ekf":
+        return cls(model, seed=seed)
+    if name == "ukf":
+        return cls(model, alpha=ukf_alpha, beta=ukf_beta, kappa=ukf_kappa, seed=seed)
+    return cls(model, int(n_particles), seed=seed)
+
+
+def _core_class(class_name: str):
+    import gpf_nav.filters as filters
+    cls = getattr(filters, class_name, None)
+    if cls is None:  # not (yet) exported by gpf_nav.filters: look in the modules that define them
+        import importlib
+        for module in ("gpf_nav.filters.kalman", "gpf_nav.filters.ensemble"):
+            try:
+                cls = getattr(importlib.import_module(module), class_name, None)
+            except ImportError:
+                cls = None
+            if cls is not None:
+                break
+    if cls is None:
+        raise ValueError(f"filter class {class_name} is not available in this gpf_nav build")
+    return cls
+
+
+def check_filter_options(name, *, n_particles, reference, weighting, regularization, resampling,
+                         ess_threshold, ukf_alpha=1e-3, ukf_kappa=0.0, state_dim=6) -> list[str]:
+    """Human-readable errors for invalid filter parameters (empty when all are valid)."""
+    from gpf_nav import resampling as resamplers
+    from gpf_nav.filters.gpf import REFERENCES, WEIGHTINGS
+    errors = []
+    if name not in FILTERS:
+        errors.append(f"parameter 'filter' = {name!r} is not a known filter; choose one of {', '.join(FILTERS)}")
+        return errors
+    if name in ("gpf", "spf", "enkf"):
+        minimum = 2 if name == "enkf" else 1
+        if not isinstance(n_particles, (int, np.integer)) or n_particles < minimum:
+            errors.append(f"parameter 'n_particles' = {n_particles!r} must be an integer >= {minimum}")
+    if name in PARTICLE_FILTERS:
+        if not (isinstance(ess_threshold, (int, float)) and 0.0 < ess_threshold <= 1.0):
+            errors.append(f"parameter 'ess_threshold' (tau) = {ess_threshold!r} must lie in (0, 1]")
+        if resampling not in resamplers.SCHEMES:
+            errors.append(f"parameter 'resampling' = {resampling!r} must be one of "
+                          f"{', '.join(sorted(resamplers.SCHEMES))}")
+        if not (math.isfinite(regularization) and regularization > 0.0):
+            errors.append(f"parameter 'regularization' = {regularization!r} must be positive")
+    if name == "gpf":
+        if reference not in REFERENCES:
+            errors.append(f"parameter 'reference' = {reference!r} must be one of {', '.join(REFERENCES)}")
+        if weighting not in WEIGHTINGS:
+            errors.append(f"parameter 'weighting' = {weighting!r} must be one of {', '.join(WEIGHTINGS)}")
+    if name == "ukf":
+        if not ukf_alpha > 0.0:
+            errors.append(f"parameter 'ukf_alpha' = {ukf_alpha!r} must be positive")
+        if not state_dim + ukf_kappa > 0.0:
+            errors.append(f"parameter 'ukf_kappa' = {ukf_kappa!r} must exceed -{state_dim}")
+    return errors
+
+
+def make_lunar_model(*, mu: float, station, range_noise_std: float, angle_noise_std: float,
+                     accel_noise_density: float, max_step: float) -> LunarDescentModel:
+    """The lunar model from node parameters, refusing invalid values with the parameter's name."""
+    errors = []
+    if not (math.isfinite(mu) and mu > 0):
+        errors.append(f"parameter 'mu' = {mu!r} must be a positive gravitational parameter [m^3/s^2]")
+    station = list(station)
+    if len(station) != 3 or not all(math.isfinite(c) for c in station):
+        errors.append(f"parameter 'station' = {station!r} must be three finite coordinates [m]")
+    for key, value in (("range_noise_std", range_noise_std), ("angle_noise_std", angle_noise_std),
+                       ("max_step", max_step)):
+        if not (math.isfinite(value) and value > 0):
+            errors.append(f"parameter '{key}' = {value!r} must be positive")
+    if not (math.isfinite(accel_noise_density) and accel_noise_density >= 0):
+        errors.append(f"parameter 'accel_noise_density' = {accel_noise_density!r} must be >= 0")
+    if errors:
+        raise ValueError("; ".join(errors))
+    return LunarDescentModel(mu=mu, station=station, range_noise_std=range_noise_std,
+                             angle_noise_std=angle_noise_std, accel_noise_density=accel_noise_density,
+                             max_step=max_step)

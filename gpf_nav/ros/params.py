@@ -1,0 +1,179 @@
+"""Parameters of the two nodes: names, defaults, units and descriptions in one table each.
+
+``config/estimator.yaml`` and ``config/simulator.yaml`` repeat the defaults (a test checks they agree).
+:func:`declare` declares a table on a node (numbers with dynamic typing, so ``1`` in a YAML file is
+accepted for a float) and returns the values coerced to the default's type; a value of the wrong type
+raises :class:`ParameterError` naming the parameter. No parameter may be changed at run time except
+those marked ``live``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from gpf_nav.models.lunar import MU_MOON
+
+
+class ParameterError(ValueError):
+    """An invalid parameter value; the message names the parameter and says what is allowed."""
+
+
+@dataclass(frozen=True)
+class Spec:
+    name: str
+    default: object      # None: optional double array with no default (``initial_state``)
+    description: str
+    live: bool = False   # may be changed at run time with ros2 param set
+
+
+ESTIMATOR = [
+    # filter
+    Spec("filter", "gpf", "Filter: gpf (geometric projection PF), spf (bootstrap PF), ekf, ukf or enkf."),
+    Spec("n_particles", 500, "Number of particles / ensemble members N (gpf, spf, enkf); integer >= 1 (>= 2 for enkf)."),
+    Spec("seed", 0, "Seed of the filter's random stream; negative: a random seed."),
+    Spec("reference", "innovation", "GPF projection reference: innovation or increment."),
+    Spec("weighting", "likelihood", "GPF weighting: likelihood (paper) or corrected (exact proposal correction)."),
+    Spec("regularization", 1e-6, "Relative Tikhonov eps of the projection, dimensionless, > 0."),
+    Spec("resampling", "systematic", "Resampling scheme: systematic, stratified, residual or multinomial."),
+    Spec("ess_threshold", 0.5, "tau in (0, 1]: resample when ESS < tau N."),
+    Spec("compute_costate", True, "spf only: also compute the diagnostic co-state (costs one projection)."),
+    Spec("ukf_alpha", 1e-3, "UKF sigma-point spread alpha > 0."),
+    Spec("ukf_beta", 2.0, "UKF beta."),
+    Spec("ukf_kappa", 0.0, "UKF kappa, n + kappa > 0."),
+    # model
+    Spec("mu", MU_MOON, "Gravitational parameter the filter assumes [m^3/s^2]."),
+    Spec("station", [0.0, 0.0, 0.0], "Observer position in world_frame [m] (x, y, z)."),
+    Spec("range_noise_std", 30.0, "Range noise standard deviation [m]."),
+    Spec("angle_noise_std", math.radians(0.03), "Azimuth/elevation noise standard deviation [rad]."),
+    Spec("accel_noise_density", 1e-3, "Process-noise white-acceleration density [m/s^1.5]."),
+    Spec("max_step", 10.0, "Longest integration sub-step of the model [s]."),
+    # frames
+    Spec("world_frame", "moon_inertial", "Frame of the state and of odometry header.frame_id (Moon-centred inertial)."),
+    Spec("base_frame", "base_link", "odometry child_frame_id (axes taken aligned with world_frame)."),
+    Spec("measurement_frame", "station", "Required header.frame_id of measurements/rae and measurements/range ('' = any)."),
+    Spec("imu_frame", "base_link", "Required header.frame_id of imu ('' = any)."),
+    # initialisation
+    Spec("initial_state", None, "Initial [x, y, z, vx, vy, vz] in world_frame [m, m/s]; unset: set_pose or measurements."),
+    Spec("initial_std", [1e3, 1e3, 1e3, 1.0, 1.0, 1.0], "Initial standard deviations [m, m, m, m/s, m/s, m/s]."),
+    Spec("initial_stamp", -1.0, "ROS time of initial_state [s]; negative: the first accepted measurement's stamp."),
+    Spec("init_window", 10, "Measurements used to initialise from the data when no initial state is given (>= 2)."),
+    # timing and input handling
+    Spec("publish_rate", 10.0, "Rate of predicted odometry between measurements [Hz, node clock]; 0 disables."),
+    Spec("max_future", 1.0, "Refuse stamps more than this ahead of the node clock [s]."),
+    Spec("imu_timeout", 1.0, "An IMU sample older than this (relative to the measurement) is not used [s]."),
+    Spec("max_extrapolation", 300.0, "Do not publish predictions more than this past the last measurement [s]."),
+    Spec("max_measurement_rate", 1000.0, "Process at most this many measurements per second (steady clock) [Hz]; 0: unlimited."),
+    Spec("queue_depth", 10, "Depth of the sensor-data (best-effort) subscription queues."),
+    Spec("quaternion_tolerance", 0.01, "Allowed | |q| - 1 | of an IMU orientation."),
+    # outputs and diagnostics
+    Spec("max_published_particles", 100, "Particles published on gpf/particles (systematic selection); 0 disables."),
+    Spec("diagnostics_period", 1.0, "Period of /diagnostics [s, steady clock]."),
+    Spec("ess_warn_threshold", 0.05, "WARN when ESS/N falls below this.", live=True),
+    Spec("costate_warn_threshold", 1e7, "WARN when the mean co-state norm exceeds this [whitened units/s].", live=True),
+    Spec("sensor_timeout", 10.0, "WARN when no measurement was accepted for this long [s, node clock].", live=True),
+    Spec("reinit_hold", 10.0, "Diagnostics stay ERROR this long after a re-initialisation [s, steady clock]."),
+]
+
+SCENARIO_DESCRIPTIONS = {
+    "epsilon": "Truth gravity is mu (1 + epsilon) [-].",
+    "apolune_altitude": "Start (apolune) altitude [m].",
+    "perilune_altitude": "Planned perilune altitude [m].",
+    "inclination_deg": "Orbit inclination [deg].",
+    "orbit_design": "Gravity the start velocity is designed with: truth or filter.",
+    "duration": "Trajectory length [s].",
+    "dt": "Measurement period [s] (measurements/rae rate = 1/dt in simulated time).",
+    "truth_step": "Longest RK4 sub-step of the truth [s].",
+    "truth_accel_noise_density": "Truth white-acceleration density [m/s^1.5].",
+    "filter_accel_noise_density": "Unused by the simulator (the estimator's accel_noise_density) [m/s^1.5].",
+    "range_noise_std": "Range noise standard deviation [m].",
+    "angle_noise_std": "Azimuth/elevation noise standard deviation [rad].",
+    "station": "Observer position in world_frame [m].",
+    "prior_position_std": "Prior position std the simulator logs [m].",
+    "prior_velocity_std": "Prior velocity std the simulator logs [m/s].",
+    "case": "full (range, azimuth, elevation) or partial (azimuth never measured).",
+    "measurement_noise_scale": "Multiplies both measurement noise stds [-].",
+    "dropout_probability": "Probability a whole measurement is lost [-].",
+    "thrust": "Retrograde specific force magnitude [m/s^2]; 0 = coasting.",
+}
+
+
+def simulator_specs() -> list[Spec]:
+    """The simulator's table: its own parameters plus ``scenario.<field>`` for every ScenarioConfig field."""
+    from gpf_nav.scenario import ScenarioConfig
+    base = ScenarioConfig()
+    specs = [
+        Spec("seed", 0, "Scenario seed: same seed, same messages."),
+        Spec("truth_csv", "", "Replay this CSV truth (t, x, y, z, vx, vy, vz[, ax, ay, az], SI) instead of generating one."),
+        Spec("imu_rate", 10.0, "IMU rate [Hz, simulated time]; 0 disables imu."),
+        Spec("imu_noise_std", 1e-4, "IMU specific-force noise standard deviation per axis [m/s^2]."),
+        Spec("truth_rate", 10.0, "truth/odometry rate [Hz, simulated time] (also at every measurement time)."),
+        Spec("publish_clock", True, "Publish /clock (simulated time); otherwise stamps follow the wall clock."),
+        Spec("clock_rate", 50.0, "Wall-clock rate [Hz] of the release loop (and of /clock)."),
+        Spec("rate_factor", 1.0, "Simulated seconds per wall second (needs publish_clock when not 1)."),
+        Spec("start_delay", 1.0, "Wall-clock wait before the trajectory starts, for subscribers to connect [s]; /clock is held at start_time meanwhile."),
+        Spec("start_time", 1000.0, "Simulated ROS time of the trajectory start [s] when publish_clock (0 means 'unset' in ROS)."),
+        Spec("loop", False, "At the end of the trajectory: true restarts it (time keeps increasing); false exits."),
+        Spec("world_frame", "moon_inertial", "frame_id of truth/odometry."),
+        Spec("base_frame", "base_link", "child_frame_id of truth/odometry."),
+        Spec("measurement_frame", "station", "frame_id of measurements/rae."),
+        Spec("imu_frame", "base_link", "frame_id of imu."),
+    ]
+    for name, description in SCENARIO_DESCRIPTIONS.items():
+        default = getattr(base, name)
+        if name == "thrust":
+            default = 0.0 if default is None else float(default)
+        elif isinstance(default, tuple):
+            default = [float(v) for v in default]
+        specs.append(Spec("scenario." + name, default, description))
+    return specs
+
+
+def declare(node, specs: list[Spec]) -> dict:
+    """Declare ``specs`` on ``node`` and return ``{name: value}`` coerced to the defaults' types."""
+    from rcl_interfaces.msg import ParameterDescriptor
+    from rclpy.exceptions import ParameterUninitializedException
+    values = {}
+    for spec in specs:
+        numeric = isinstance(spec.default, (int, float)) and not isinstance(spec.default, bool)
+        descriptor = ParameterDescriptor(description=spec.description, read_only=not spec.live,
+                                         dynamic_typing=numeric or spec.default is None)
+        if spec.default is None:  # no default, any numeric list: declared NOT_SET with dynamic typing
+            node.declare_parameter(spec.name, None, descriptor)
+            try:
+                value = node.get_parameter(spec.name).value
+            except ParameterUninitializedException:
+                value = None
+        else:
+            value = node.declare_parameter(spec.name, spec.default, descriptor).value
+        values[spec.name] = coerce(spec, value)
+    return values
+
+
+def coerce(spec: Spec, value):
+    """``value`` converted to the type of ``spec.default``; ParameterError when it cannot be."""
+    default = spec.default
+    try:
+        if default is None:
+            return None if value is None or len(value) == 0 else [float(v) for v in value]
+        if isinstance(default, bool):
+            if not isinstance(value, bool):
+                raise TypeError
+            return value
+        if isinstance(default, int):
+            if isinstance(value, bool) or not float(value).is_integer():
+                raise TypeError
+            return int(value)
+        if isinstance(default, float):
+            if isinstance(value, (bool, str)):
+                raise TypeError
+            return float(value)
+        if isinstance(default, list):
+            return [float(v) for v in value]
+        if isinstance(default, str):
+            if not isinstance(value, str):
+                raise TypeError
+            return value
+    except (TypeError, ValueError):
+        pass
+    raise ParameterError(f"parameter '{spec.name}' = {value!r} has the wrong type; expected "
+                         f"{type(default).__name__ if default is not None else 'a list of 6 floats'}")

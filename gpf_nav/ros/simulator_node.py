@@ -1,0 +1,191 @@
+"""``ros2 run gpf_nav simulator``: the lunar-descent scenario played out on ROS topics.
+
+Generates the truth with the core scenario generator (or replays a CSV truth, parameter
+``truth_csv``) and publishes, in simulated time, ``measurements/rae``, ``imu``, ``truth/odometry`` and
+``/clock``. A wall-clock loop at ``clock_rate`` Hz advances simulated time by ``rate_factor`` times
+the elapsed wall time, publishes ``/clock`` and releases every event of :mod:`gpf_nav.ros.playback`
+due by then, with the event's own stamp; so message contents never depend on timing: same seed, same
+messages. See ``docs/ros.md``.
+"""
+from __future__ import annotations
+
+import math
+import sys
+import time
+
+import numpy as np
+import rclpy
+import rclpy.exceptions
+import rclpy.logging
+from geometry_msgs.msg import Vector3Stamped
+from nav_msgs.msg import Odometry
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock as ClockMsg
+from sensor_msgs.msg import Imu
+
+from gpf_nav.ros import conversions as conv
+from gpf_nav.ros.params import ParameterError, declare, simulator_specs
+from gpf_nav.ros.playback import NS, build_events
+
+NODE_NAME = "lunar_simulator"
+
+
+def scenario_from_parameters(p: dict):
+    """``(ScenarioConfig, Scenario)`` from the simulator's parameters (generated or CSV replay)."""
+    from gpf_nav.scenario import ScenarioConfig, generate, load_csv
+    fields = {k[len("scenario."):]: v for k, v in p.items() if k.startswith("scenario.")}
+    if not fields.get("thrust"):
+        fields["thrust"] = None
+    config = ScenarioConfig.from_dict(fields)
+    if p["truth_csv"]:
+        return config, load_csv(p["truth_csv"], config, p["seed"])
+    return config, generate(config, p["seed"])
+
+
+def check_simulator_parameters(p: dict) -> list[str]:
+    errors = []
+    for key in ("imu_rate", "truth_rate", "imu_noise_std", "start_time", "start_delay"):
+        if not (math.isfinite(p[key]) and p[key] >= 0):
+            errors.append(f"parameter '{key}' = {p[key]!r} must be >= 0")
+    for key in ("clock_rate", "rate_factor"):
+        if not (math.isfinite(p[key]) and p[key] > 0):
+            errors.append(f"parameter '{key}' = {p[key]!r} must be positive")
+    if not p["publish_clock"] and p["rate_factor"] != 1.0:
+        errors.append("parameter 'rate_factor' != 1 needs publish_clock: true (stamps would run ahead "
+                      "of the wall clock)")
+    return errors
+
+
+class SimulatorNode(Node):
+    """The ``lunar_simulator`` node. Raises :class:`ParameterError` on invalid parameters.
+
+    Attributes:
+        finished: True once the trajectory has ended and ``loop`` is false.
+        published: messages published per kind (``measurement``, ``imu``, ``truth``, ``clock``).
+    """
+
+    def __init__(self, name: str = NODE_NAME, **kwargs):
+        super().__init__(name, **kwargs)
+        p = self.params = declare(self, simulator_specs())
+        errors = check_simulator_parameters(p)
+        if not errors:
+            try:
+                self.config, self.scenario = scenario_from_parameters(p)
+            except (ValueError, OSError) as err:
+                errors.append(f"scenario: {err}")
+        if errors:
+            raise ParameterError("invalid parameters: " + "; ".join(errors))
+        self.events = build_events(self.scenario, p["imu_rate"], p["imu_noise_std"], p["truth_rate"],
+                                   p["seed"])
+        self.span_ns = max(e.t_ns for e in self.events)
+        self.period_ns = int(round(float(np.median(np.diff(self.scenario.times))) * NS)) \
+            if len(self.scenario.times) > 1 else NS
+        self.finished = False
+        self.published = {"measurement": 0, "imu": 0, "truth": 0, "clock": 0}
+        self._index = 0
+        self._lap_offset_ns = 0
+        self._wall_start = time.monotonic() + p["start_delay"]
+        if p["publish_clock"]:
+            self._epoch_ns = int(round(p["start_time"] * 1e9))
+        else:
+            self._epoch_ns = Clock(clock_type=ClockType.SYSTEM_TIME).now().nanoseconds
+
+        qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=50)
+        self.rae_pub = self.create_publisher(Vector3Stamped, "measurements/rae", qos)
+        self.imu_pub = self.create_publisher(Imu, "imu", qos)
+        self.truth_pub = self.create_publisher(Odometry, "truth/odometry", qos)
+        self.clock_pub = self.create_publisher(ClockMsg, "/clock", qos) if p["publish_clock"] else None
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(1.0 / p["clock_rate"], self._tick, clock=self._steady)
+        n_meas = sum(e.kind == "measurement" for e in self.events)
+        mean = self.scenario.prior_mean
+        self.get_logger().info(
+            f"lunar descent: {n_meas} measurements over {self.span_ns * 1e-9:.0f} s "
+            f"(case {self.config.case}, seed {p['seed']}), rate_factor {p['rate_factor']:g}, "
+            f"start at {self._epoch_ns * 1e-9:.3f} s; prior mean "
+            f"[{', '.join(f'{v:.6g}' for v in mean)}]")
+
+    def stamp_ns(self, t_ns: int) -> int:
+        """ROS time of trajectory time ``t_ns`` in the current lap."""
+        return self._epoch_ns + self._lap_offset_ns + t_ns
+
+    def _tick(self) -> None:
+        if self.finished:
+            return
+        now = time.monotonic()
+        target = int((now - self._wall_start) * self.params["rate_factor"] * NS) - self._lap_offset_ns
+        target = min(target, self.span_ns)
+        if self.clock_pub is not None:
+            self.clock_pub.publish(ClockMsg(clock=conv.ns_to_stamp(self.stamp_ns(max(target, 0)))))
+            self.published["clock"] += 1
+        if target < 0:
+            return
+        while self._index < len(self.events) and self.events[self._index].t_ns <= target:
+            self._emit(self.events[self._index])
+            self._index += 1
+        if self._index >= len(self.events):
+            self._end_of_trajectory()
+
+    def _emit(self, event) -> None:
+        p = self.params
+        stamp = self.stamp_ns(event.t_ns)
+        if event.kind == "measurement":
+            self.rae_pub.publish(conv.vector3_stamped(event.data, stamp, p["measurement_frame"]))
+        elif event.kind == "truth":
+            state = np.array(event.data)
+            self.truth_pub.publish(conv.odometry_msg(state, np.zeros((6, 6)), stamp, p["world_frame"],
+                                                     p["base_frame"]))
+        else:
+            msg = Imu()
+            msg.header.stamp = conv.ns_to_stamp(stamp)
+            msg.header.frame_id = p["imu_frame"]
+            msg.orientation.w = 1.0  # body axes aligned with the world's (exactly known)
+            msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z = event.data
+            var = p["imu_noise_std"] ** 2
+            msg.linear_acceleration_covariance = [var, 0.0, 0.0, 0.0, var, 0.0, 0.0, 0.0, var]
+            msg.angular_velocity_covariance[0] = -1.0  # not provided
+            self.imu_pub.publish(msg)
+        self.published[event.kind] += 1
+
+    def _end_of_trajectory(self) -> None:
+        end = self.stamp_ns(self.span_ns)
+        if self.params["loop"]:
+            self.get_logger().info(f"trajectory ended at {end * 1e-9:.3f} s; looping (the vehicle jumps back "
+                                   "to the start: reset the estimator)")
+            self._lap_offset_ns += self.span_ns + self.period_ns
+            self._index = 0
+            return
+        self.finished = True
+        self.get_logger().info(f"trajectory ended at {end * 1e-9:.3f} s after {self.published['measurement']} "
+                               "measurements; exiting (set loop: true to repeat)")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console script ``simulator``: exits 0 at the end of the trajectory, 2 on invalid parameters."""
+    rclpy.init(args=sys.argv if argv is None else argv)
+    try:
+        node = SimulatorNode()
+    except (ParameterError, rclpy.exceptions.InvalidParameterTypeException,
+            rclpy.exceptions.InvalidParameterValueException) as err:
+        rclpy.logging.get_logger(NODE_NAME).fatal(f"refusing to start: {err}")
+        rclpy.try_shutdown()
+        return 2
+    try:
+        while rclpy.ok() and not node.finished:
+            rclpy.spin_once(node, timeout_sec=0.1)
+        linger = time.monotonic() + 1.0  # let reliable subscribers receive the last messages
+        while rclpy.ok() and time.monotonic() < linger:
+            rclpy.spin_once(node, timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
