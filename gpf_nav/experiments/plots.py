@@ -1,0 +1,215 @@
+"""Figures of the Monte Carlo campaign and the sweeps (matplotlib, headless ``Agg`` backend).
+
+matplotlib is an optional extra (``pip install gpf_nav[experiments]``); it is imported only when a
+figure is drawn. Every figure states what is plotted, over how many runs, and in which units.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+CASE_TITLES = {"full": "Case 1: full observability (range, azimuth, elevation)",
+               "partial": "Case 2: partial observability (range, elevation; no azimuth)"}
+
+_COLOURS = {
+    "GPF (innovation, likelihood)": "#d62728",
+    "GPF as printed (increment, likelihood)": "#ff7f0e",
+    "GPF exact (innovation, corrected)": "#8c564b",
+    "GPF Q-metric (innovation, corrected, eps=1)": "#e377c2",
+    "SPF": "#1f77b4",
+    "EKF": "#2ca02c",
+    "UKF": "#9467bd",
+    "EnKF": "#17becf",
+}
+_STYLES = {"UKF": "--", "GPF exact (innovation, corrected)": "--"}
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def colour(name: str) -> str:
+    return _COLOURS.get(name, "#7f7f7f")
+
+
+def style(name: str) -> str:
+    return _STYLES.get(name, "-")
+
+
+def _save(fig, path: Path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    _pyplot().close(fig)
+    return path
+
+
+def error_evolution(times: np.ndarray, errors: dict, runs: int, path: Path) -> Path:
+    """Position error (km) against time: median over runs with the 10-90 % band, per filter and case.
+
+    ``errors[case][filter]`` is ``(runs, K)`` in metres.
+    """
+    plt = _pyplot()
+    cases = list(errors)
+    fig, axes = plt.subplots(1, len(cases), figsize=(7.0 * len(cases), 5.0), squeeze=False)
+    for ax, case in zip(axes[0], cases):
+        for name, series in errors[case].items():
+            km = np.asarray(series) / 1e3
+            ax.plot(times, np.nanmedian(km, axis=0), style(name), color=colour(name), label=name, lw=1.4)
+            if km.shape[0] > 1:
+                lo, hi = np.nanpercentile(km, [10, 90], axis=0)
+                ax.fill_between(times, lo, hi, color=colour(name), alpha=0.15, lw=0)
+        ax.set_yscale("log")
+        ax.set_xlabel("time since apolune (s)")
+        ax.set_ylabel("position error |r_hat - r| (km)")
+        ax.set_title(CASE_TITLES.get(case, case), fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0][0].legend(fontsize=8, loc="best")
+    fig.suptitle(f"Position error over time: median of {runs} Monte Carlo runs, shaded 10-90 % of runs")
+    return _save(fig, path)
+
+
+def ess_evolution(times: np.ndarray, ess: dict, runs: int, threshold: float, path: Path) -> Path:
+    """ESS/N (before resampling) against time, mean over runs, particle filters only."""
+    plt = _pyplot()
+    cases = list(ess)
+    fig, axes = plt.subplots(1, len(cases), figsize=(7.0 * len(cases), 4.5), squeeze=False)
+    for ax, case in zip(axes[0], cases):
+        for name, series in ess[case].items():
+            s = np.asarray(series)
+            mean = np.nanmean(s, axis=0)
+            ax.plot(times, mean, style(name), color=colour(name), lw=1.2,
+                    label=f"{name} (time average {np.nanmean(s):.3f})")
+        ax.axhline(threshold, color="k", lw=0.8, ls=":", label=f"resampling threshold {threshold:g}")
+        ax.set_ylim(-0.02, 1.05)
+        ax.set_xlabel("time since apolune (s)")
+        ax.set_ylabel("effective sample size / N (after weighting)")
+        ax.set_title(CASE_TITLES.get(case, case), fontsize=10)
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8, loc="center right")
+    fig.suptitle(f"Normalised effective sample size, mean of {runs} Monte Carlo runs")
+    return _save(fig, path)
+
+
+def nees_evolution(times: np.ndarray, nees: dict, band: tuple[float, float], runs: int, path: Path) -> Path:
+    """Run-averaged NEES against time (log scale) with the 95 % chi-square band of a consistent filter."""
+    plt = _pyplot()
+    cases = list(nees)
+    fig, axes = plt.subplots(1, len(cases), figsize=(7.0 * len(cases), 4.5), squeeze=False)
+    for ax, case in zip(axes[0], cases):
+        for name, series in nees[case].items():
+            avg = np.mean(np.asarray(series), axis=0)  # NaN where any run's covariance was singular
+            if np.any(np.isfinite(avg)):
+                ax.plot(times, avg, style(name), color=colour(name), lw=1.2, label=name)
+            else:
+                ax.plot([], [], style(name), color=colour(name), label=f"{name} (covariance singular)")
+        ax.axhspan(band[0], band[1], color="k", alpha=0.15,
+                   label=f"95 % band of a consistent filter [{band[0]:.2f}, {band[1]:.2f}]")
+        ax.set_yscale("log")
+        ax.set_xlabel("time since apolune (s)")
+        ax.set_ylabel("NEES averaged over runs (dimensionless, 6 dof)")
+        ax.set_title(CASE_TITLES.get(case, case), fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0][0].legend(fontsize=7, loc="best")
+    fig.suptitle(f"Filter consistency: normalised estimation error squared, mean of {runs} runs "
+                 f"(a consistent filter stays in the grey band)")
+    return _save(fig, path)
+
+
+def rmse_boxplot(per_run: dict, path: Path) -> Path:
+    """Distribution over runs of the position RMSE (km), one box per filter, one panel per case."""
+    plt = _pyplot()
+    cases = list(per_run)
+    fig, axes = plt.subplots(1, len(cases), figsize=(7.0 * len(cases), 4.8), squeeze=False)
+    for ax, case in zip(axes[0], cases):
+        names = list(per_run[case])
+        data = [np.asarray(per_run[case][n], dtype=float) for n in names]
+        data = [d[np.isfinite(d)] for d in data]
+        try:
+            box = ax.boxplot(data, orientation="horizontal", patch_artist=True, widths=0.6)
+        except TypeError:  # matplotlib < 3.10
+            box = ax.boxplot(data, vert=False, patch_artist=True, widths=0.6)
+        for patch, name in zip(box["boxes"], names):
+            patch.set_facecolor(colour(name))
+            patch.set_alpha(0.5)
+        ax.set_yticks(range(1, len(names) + 1), names, fontsize=8)
+        ax.set_xscale("log")
+        ax.set_xlabel("position RMSE over the run (km)")
+        ax.set_title(CASE_TITLES.get(case, case), fontsize=10)
+        ax.grid(True, which="both", axis="x", alpha=0.3)
+    runs = max(len(v) for c in per_run.values() for v in c.values())
+    fig.suptitle(f"Position RMSE per Monte Carlo run ({runs} runs per box)")
+    return _save(fig, path)
+
+
+def costate_degeneracy(points: dict, correlations: dict, runs: int, path: Path) -> Path:
+    """The paper's co-state / degeneracy figure, SPF against GPF.
+
+    ``points[case][filter]`` holds per-step arrays ``costate``, ``ess``, ``error`` (m) pooled over runs;
+    ``correlations[case][filter]`` the Pearson coefficients ``costate_vs_ess`` and ``ess_vs_error``.
+    Row per case; left: co-state norm against ESS/N; right: position error against ESS/N.
+    """
+    plt = _pyplot()
+    cases = list(points)
+    fig, axes = plt.subplots(len(cases), 2, figsize=(13.0, 4.8 * len(cases)), squeeze=False)
+    for row, case in enumerate(cases):
+        ax_c, ax_e = axes[row]
+        for name, p in points[case].items():
+            corr = correlations[case][name]
+            rc = _fmt_r(corr["costate_vs_ess"]["pearson"])
+            re = _fmt_r(corr["ess_vs_error"]["pearson"])
+            ax_c.scatter(p["ess"], p["costate"], s=4, alpha=0.35, color=colour(name),
+                         label=f"{name}: rho = {rc}")
+            ax_e.scatter(p["ess"], np.asarray(p["error"]) / 1e3, s=4, alpha=0.35, color=colour(name),
+                         label=f"{name}: rho = {re}")
+        for ax in (ax_c, ax_e):
+            ax.set_xlabel("effective sample size / N after weighting (1 = no degeneracy)")
+            ax.set_xlim(-0.02, 1.05)
+            ax.set_yscale("log")
+            ax.grid(True, which="both", alpha=0.3)
+            ax.legend(fontsize=8, markerscale=3, loc="best")
+        ax_c.set_ylabel("mean co-state norm |lambda| (whitened measurement units / s)")
+        ax_e.set_ylabel("position error (km)")
+        label = CASE_TITLES.get(case, case)
+        ax_c.set_title(f"({'ac'[row % 2]}) co-state vs degeneracy - {label}", fontsize=9)
+        ax_e.set_title(f"({'bd'[row % 2]}) error vs degeneracy - {label}", fontsize=9)
+    fig.suptitle(f"Co-state, degeneracy and error, one point per time step of {runs} runs "
+                 f"(rho: Pearson correlation over all steps)")
+    return _save(fig, path)
+
+
+def _fmt_r(value) -> str:
+    return "n/a" if value is None else f"{value:+.2f}"
+
+
+def sweep(values: np.ndarray, table: dict, param_label: str, runs: int, path: Path,
+          reference_value: float | None = None) -> Path:
+    """Position RMSE (km, mean over runs with 1-sigma error bars) against a swept parameter.
+
+    ``table[case][filter]`` is a list of ``{mean, std}`` (km), one per value.
+    """
+    plt = _pyplot()
+    cases = list(table)
+    fig, axes = plt.subplots(1, len(cases), figsize=(7.0 * len(cases), 4.8), squeeze=False)
+    for ax, case in zip(axes[0], cases):
+        for name, rows in table[case].items():
+            mean = np.array([np.nan if r["mean"] is None else r["mean"] for r in rows])
+            std = np.array([np.nan if r["std"] is None else r["std"] for r in rows])
+            ax.errorbar(values, mean, yerr=std, fmt="o" + style(name), color=colour(name), label=name,
+                        ms=4, lw=1.3, capsize=3)
+        if reference_value is not None:
+            ax.axvline(reference_value, color="k", ls=":", lw=0.8, label="Table 1 setting")
+        ax.set_yscale("log")
+        ax.set_xlabel(param_label)
+        ax.set_ylabel("position RMSE (km), mean +- std over runs")
+        ax.set_title(CASE_TITLES.get(case, case), fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0][0].legend(fontsize=8, loc="best")
+    fig.suptitle(f"Position RMSE against {param_label.split(' (')[0]}, {runs} Monte Carlo runs per point")
+    return _save(fig, path)

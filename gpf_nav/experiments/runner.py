@@ -1,0 +1,203 @@
+"""One Monte Carlo run: one scenario realisation, every filter on it, per-filter summaries.
+
+A :class:`RunTask` is self-contained (seed, run index, scenario config, filter names), so the result does
+not depend on which process or machine executes it: the scenario seed and the filters' seed are derived
+from ``(seed, run)`` alone by :func:`run_seeds`, and nothing uses a global random state.
+
+The paper's fairness rule holds inside a run: every filter sees the same truth (hence the same process
+noise), the same measurements and the same prior ``N(prior_mean, prior_cov)``. All filters of a run also
+get the same seed for their own random stream (common random numbers), so e.g. the particle filters
+start from the same initial cloud. The truth and prior of run ``r`` do not depend on the case, the
+mismatch ``epsilon`` or the noise scale beyond what those parameters change physically (see
+docs/scenario.md, "Seeds and streams"), which pairs the runs of Case 1 and Case 2 and of a sweep.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gpf_nav.experiments import metrics
+from gpf_nav.scenario import ScenarioConfig, filter_model, generate
+
+DEFAULT_PARTICLES = 500
+DEFAULT_DIVERGENCE_BOUND = 1.0e6  # m: a run whose position error ever exceeds 1000 km has diverged
+
+GPF_DEFAULT = "GPF (innovation, likelihood)"
+GPF_PRINTED = "GPF as printed (increment, likelihood)"
+GPF_EXACT = "GPF exact (innovation, corrected)"
+GPF_QMETRIC = "GPF Q-metric (innovation, corrected, eps=1)"
+
+
+def _make_filter(name: str, model, n_particles: int, seed):
+    """Construct the filter named ``name`` (one of :data:`FILTERS` or :data:`EXTRA_FILTERS`)."""
+    from gpf_nav.filters import BootstrapPF, GeometricProjectionPF
+
+    if name == GPF_DEFAULT:
+        return GeometricProjectionPF(model, n_particles, reference="innovation", weighting="likelihood",
+                                     seed=seed)
+    if name == GPF_PRINTED:
+        return GeometricProjectionPF(model, n_particles, reference="increment", weighting="likelihood",
+                                     seed=seed)
+    if name == GPF_EXACT:
+        return GeometricProjectionPF(model, n_particles, reference="innovation", weighting="corrected",
+                                     seed=seed)
+    if name == GPF_QMETRIC:
+        return GeometricProjectionPF(model, n_particles, reference="innovation", weighting="corrected",
+                                     metric="process_noise", regularization=1.0, seed=seed)
+    if name == "SPF":
+        return BootstrapPF(model, n_particles, seed=seed, compute_costate=True)
+    if name == "EKF":
+        return _kalman("ExtendedKF")(model, seed=seed)
+    if name == "UKF":
+        return _kalman("UnscentedKF")(model, seed=seed)
+    if name == "EnKF":
+        return _kalman("EnsembleKF")(model, n_particles, seed=seed)
+    raise ValueError(f"unknown filter {name!r}; known: {list(FILTERS) + list(EXTRA_FILTERS)}")
+
+
+def _kalman(cls_name: str):
+    import gpf_nav.filters as filters
+
+    if hasattr(filters, cls_name):
+        return getattr(filters, cls_name)
+    module = "gpf_nav.filters.ensemble" if cls_name == "EnsembleKF" else "gpf_nav.filters.kalman"
+    import importlib
+
+    return getattr(importlib.import_module(module), cls_name)
+
+
+FILTERS = (GPF_DEFAULT, GPF_PRINTED, GPF_EXACT, "SPF", "EKF", "UKF", "EnKF")
+"""The rows of the Monte Carlo table, in display order (all with N = 500 particles / members)."""
+EXTRA_FILTERS = (GPF_QMETRIC,)
+"""Filters that can be asked for with ``--filters`` but are not part of the default campaign."""
+PARTICLE_FILTERS = (GPF_DEFAULT, GPF_PRINTED, GPF_EXACT, GPF_QMETRIC, "SPF")
+"""Filters that have an ESS and a co-state."""
+
+
+ALIASES = {"gpf": GPF_DEFAULT, "gpf-printed": GPF_PRINTED, "gpf-exact": GPF_EXACT, "gpf-qmetric": GPF_QMETRIC,
+           "spf": "SPF", "ekf": "EKF", "ukf": "UKF", "enkf": "EnKF"}
+"""Short command-line names of the filters (the display names contain commas)."""
+
+
+def run_seeds(seed: int, run: int) -> tuple[int, int]:
+    """``(scenario seed, filter seed)`` of Monte Carlo run ``run`` of a campaign seeded ``seed``."""
+    words = np.random.SeedSequence([int(seed), int(run)]).generate_state(2, np.uint64)
+    return int(words[0]), int(words[1])
+
+
+@dataclass(frozen=True)
+class RunTask:
+    """Everything one run needs.
+
+    Attributes:
+        index: position of the result in the campaign's output (results are ordered by it).
+        run: Monte Carlo run number (with ``seed``, it fixes the random numbers).
+        seed: campaign seed.
+        config: scenario configuration (case, epsilon, noise scale, duration, ...).
+        filters: names of the filters to run, in order.
+        n_particles: particles (and EnKF members).
+        series: also return per-step time series (for the figures).
+        divergence_bound: position error (m) beyond which a run counts as diverged.
+        tag: free label carried to the result (e.g. the sweep value).
+    """
+
+    index: int
+    run: int
+    seed: int
+    config: ScenarioConfig
+    filters: tuple[str, ...] = FILTERS
+    n_particles: int = DEFAULT_PARTICLES
+    series: bool = False
+    divergence_bound: float = DEFAULT_DIVERGENCE_BOUND
+    tag: dict = field(default_factory=dict, compare=False, hash=False)
+
+
+def run_filter(flt, scenario, divergence_bound: float = DEFAULT_DIVERGENCE_BOUND) -> dict:
+    """Run one initialised-from-prior filter over a scenario and summarise it.
+
+    Returns a dict with per-run scalars (``position_rmse`` m, ``velocity_rmse`` m/s, ``ess`` time average
+    of ESS/N, ``costate_norm`` time average, ``nees`` time average over the steps with a positive
+    definite covariance, ``nees_defined`` fraction of such steps, ``resample_rate``, ``max_position_error``
+    m, ``diverged``, ``nonfinite``, ``error`` message or None, ``seconds``) and the per-step ``series``
+    (``position_error`` m, ``velocity_error`` m/s, ``nees``, ``ess``, ``costate_norm``), NaN past a stop.
+    A filter that raises or produces a non-finite estimate is stopped there and flagged ``nonfinite``.
+    """
+    steps = scenario.times.shape[0]
+    dt = scenario.config.dt
+    pos_err = np.full(steps, np.nan)
+    vel_err = np.full(steps, np.nan)
+    n = scenario.truth.shape[1]
+    state_errors = np.full((steps, n), np.nan)
+    covariances = np.full((steps, n, n), np.nan)
+    ess = np.full(steps, np.nan)
+    costate = np.full(steps, np.nan)
+    resampled = np.zeros(steps, dtype=bool)
+    is_particle = hasattr(flt, "ess")
+    error = None
+    start = time.perf_counter()
+    try:
+        flt.initialize(scenario.prior_mean, scenario.prior_cov)
+        for k in range(steps):
+            flt.predict(dt, scenario.specific_force[k])
+            flt.update(scenario.measurements[k])
+            mean = flt.mean
+            if not np.all(np.isfinite(mean)):
+                error = f"non-finite estimate at step {k}"
+                break
+            e = mean - scenario.truth[k + 1]
+            pos_err[k] = math.sqrt(float(e[:3] @ e[:3]))
+            vel_err[k] = math.sqrt(float(e[3:] @ e[3:]))
+            state_errors[k] = e
+            covariances[k] = flt.covariance
+            if is_particle:
+                ess[k] = flt.ess
+                costate[k] = flt.costate_norm_mean
+                resampled[k] = flt.resampled
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+        error = f"{type(exc).__name__}: {exc}"
+    seconds = time.perf_counter() - start
+    nees = metrics.nees(state_errors, covariances)
+    nonfinite = error is not None
+    finished = bool(np.all(np.isfinite(pos_err)))
+    summary = {
+        "position_rmse": metrics.rmse(pos_err) if finished else math.nan,
+        "velocity_rmse": metrics.rmse(vel_err) if finished else math.nan,
+        "ess": metrics.time_average(ess) if is_particle and finished else math.nan,
+        "costate_norm": metrics.time_average(costate) if is_particle and finished else math.nan,
+        "nees": metrics.time_average(nees) if finished else math.nan,
+        "nees_defined": float(np.mean(np.isfinite(nees))) if finished else math.nan,
+        "resample_rate": float(resampled.mean()) if is_particle and finished else math.nan,
+        "max_position_error": float(np.nanmax(pos_err)) if np.any(np.isfinite(pos_err)) else math.nan,
+        "nonfinite": nonfinite,
+        "error": error,
+        "seconds": seconds,
+    }
+    summary["diverged"] = bool(not nonfinite and summary["max_position_error"] > divergence_bound)
+    summary["series"] = {"position_error": pos_err, "velocity_error": vel_err, "nees": nees,
+                         "ess": ess, "costate_norm": costate}
+    return summary
+
+
+def run_task(task: RunTask) -> dict:
+    """Generate the scenario of ``task`` and run every filter on it.
+
+    Returns ``{"index", "run", "case", "tag", "filters": {name: summary}}``; each summary as
+    :func:`run_filter`, without ``series`` unless ``task.series``. Also ``"times"`` (s) when series are kept.
+    """
+    scenario_seed, filter_seed = run_seeds(task.seed, task.run)
+    scenario = generate(task.config, scenario_seed)
+    model = filter_model(task.config)
+    out = {"index": task.index, "run": task.run, "case": task.config.case, "tag": dict(task.tag),
+           "filters": {}}
+    for name in task.filters:
+        flt = _make_filter(name, model, task.n_particles, filter_seed)
+        summary = run_filter(flt, scenario, task.divergence_bound)
+        if not task.series:
+            del summary["series"]
+        out["filters"][name] = summary
+    if task.series:
+        out["times"] = scenario.times.copy()
+    return out

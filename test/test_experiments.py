@@ -1,0 +1,149 @@
+"""Smoke and determinism tests of ``gpf-nav montecarlo`` / ``gpf-nav sweep`` (short scenarios)."""
+import json
+import math
+
+import numpy as np
+import pytest
+
+from gpf_nav import cli
+from gpf_nav.experiments import montecarlo, runner
+from gpf_nav.experiments.parallel import map_tasks
+from gpf_nav.scenario import ScenarioConfig
+
+SHORT = ["--duration", "100", "--no-progress"]  # 50 filter steps instead of 1200
+
+
+def _finite(entry):
+    return entry["mean"] is not None and math.isfinite(entry["mean"]) and math.isfinite(entry["std"])
+
+
+def _strip_meta(report):
+    return {k: v for k, v in report.items() if k != "meta"}
+
+
+@pytest.fixture(scope="module")
+def smoke(tmp_path_factory):
+    out = tmp_path_factory.mktemp("mc")
+    assert cli.main(["montecarlo", "--runs", "5", "--workers", "2", "--out", str(out)] + SHORT) == 0
+    return out, json.loads((out / "results.json").read_text())
+
+
+def test_montecarlo_smoke_json_schema_and_finite_numbers(smoke):
+    out, report = smoke
+    assert report["schema"] == montecarlo.SCHEMA
+    assert set(report["cases"]) == {"full", "partial"}
+    assert report["settings"]["runs"] == 5 and report["settings"]["n_particles"] == 500
+    assert report["settings"]["filters"] == list(runner.FILTERS)
+    for case, data in report["cases"].items():
+        assert set(data["filters"]) == set(runner.FILTERS)
+        for name, row in data["filters"].items():
+            for metric in montecarlo.METRICS:
+                assert set(row[metric]) >= {"mean", "std"}, (case, name, metric)
+            for metric in ("position_rmse_km", "velocity_rmse_mps", "max_position_error_km"):
+                assert _finite(row[metric]) and row[metric]["n"] == 5, (case, name, metric)
+            if name in runner.PARTICLE_FILTERS:
+                for metric in ("ess", "costate_norm", "resample_rate"):
+                    assert _finite(row[metric]), (case, name, metric)
+                assert 0.0 < row["ess"]["mean"] <= 1.0
+            else:
+                assert row["ess"]["mean"] is None
+            # NEES is finite unless the filter's covariance was never positive definite (then it is null)
+            assert _finite(row["nees"]) or (row["nees"]["mean"] is None and row["nees_defined"]["mean"] == 0)
+            assert data["failures"][name]["nonfinite"] == 0
+        assert set(data["wilcoxon"]) == set(runner.FILTERS) - {runner.GPF_DEFAULT}
+        for p in data["wilcoxon"].values():
+            assert p is None or 0.0 <= p <= 1.0
+        band = data["nees_band"]
+        assert band["lower"] < 6.0 < band["upper"] and band["runs"] == 5
+        assert set(data["correlations"]) == {n for n in runner.FILTERS if n in runner.PARTICLE_FILTERS}
+    for case in report["per_run"]:
+        assert all(len(v["position_rmse_km"]) == 5 for v in report["per_run"][case].values())
+    assert report["meta"]["wall_seconds"] > 0
+    text = (out / "results.md").read_text()
+    assert "| GPF (innovation, likelihood) |" in text and "Wilcoxon" in text
+
+
+def test_montecarlo_writes_figures(smoke):
+    pytest.importorskip("matplotlib")
+    out, _ = smoke
+    for name in ("error_evolution", "ess", "nees", "rmse_per_run", "costate_degeneracy"):
+        path = out / f"{name}.png"
+        assert path.exists() and path.stat().st_size > 10_000, name
+
+
+def test_same_seed_same_numbers_for_any_worker_count(smoke, tmp_path):
+    _, report = smoke
+    assert cli.main(["montecarlo", "--runs", "5", "--workers", "1", "--no-plots", "--out", str(tmp_path)]
+                    + SHORT) == 0
+    again = json.loads((tmp_path / "results.json").read_text())
+    assert _strip_meta(again) == _strip_meta(report)
+
+
+def test_different_seed_different_numbers(tmp_path):
+    config = ScenarioConfig(duration=40.0)
+    tasks = [runner.RunTask(0, 0, seed, config, filters=("SPF",)) for seed in (0, 1)]
+    a, b = (runner.run_task(t)["filters"]["SPF"]["position_rmse"] for t in tasks)
+    assert a != b
+
+
+def test_run_task_is_reproducible_and_paired_across_cases():
+    full = runner.RunTask(0, 3, 7, ScenarioConfig(duration=40.0), filters=("EKF", "SPF"), series=True)
+    first, second = runner.run_task(full), runner.run_task(full)
+    for name in ("EKF", "SPF"):
+        assert first["filters"][name]["position_rmse"] == second["filters"][name]["position_rmse"]
+        np.testing.assert_array_equal(first["filters"][name]["series"]["ess"],
+                                      second["filters"][name]["series"]["ess"])
+    assert runner.run_seeds(7, 3) == runner.run_seeds(7, 3) != runner.run_seeds(7, 4)
+
+
+def test_dask_scheduler_gives_the_same_results_as_the_local_pool(smoke, tmp_path):
+    distributed = pytest.importorskip("dask.distributed")
+    _, report = smoke
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        assert cli.main(["montecarlo", "--runs", "5", "--scheduler", cluster.scheduler_address,
+                         "--no-plots", "--out", str(tmp_path)] + SHORT) == 0
+    via_dask = json.loads((tmp_path / "results.json").read_text())
+    assert via_dask["meta"]["scheduler"].startswith("tcp://")
+    assert _strip_meta(via_dask) == _strip_meta(report)
+
+
+def _square(x):
+    return x * x
+
+
+def test_map_tasks_keeps_input_order():
+    tasks = list(range(7, 0, -1))
+    expected = [t * t for t in tasks]
+    assert map_tasks(_square, tasks, workers=1, progress=False) == expected
+    assert map_tasks(_square, tasks, workers=2, progress=False) == expected
+    with pytest.raises(ValueError):
+        map_tasks(_square, tasks, workers=0, progress=False)
+
+
+def test_failure_accounting_divergence_kept_nonfinite_excluded():
+    ok = {"position_rmse": 1000.0, "velocity_rmse": 1.0, "diverged": False, "nonfinite": False, "error": None}
+    div = dict(ok, position_rmse=5e6, diverged=True)
+    bad = dict(ok, position_rmse=math.nan, nonfinite=True, error="LinAlgError: x")
+    results = [{"filters": {"F": r}} for r in (ok, div, bad)]
+    values = montecarlo.per_run_values(results, "F", "position_rmse", 1e-3)
+    np.testing.assert_array_equal(np.isnan(values), [False, False, True])
+    assert values[1] == pytest.approx(5000.0)  # the diverged run stays in the statistics
+
+
+def test_sweep_smoke(tmp_path):
+    assert cli.main(["sweep", "--param", "mismatch", "--values", "0,0.2", "--runs", "2", "--workers", "2",
+                     "--filters", "gpf,ekf", "--out", str(tmp_path)] + SHORT) == 0
+    report = json.loads((tmp_path / "sweep_mismatch.json").read_text())
+    assert report["values"] == [0.0, 0.2] and report["field"] == "epsilon"
+    for case in ("full", "partial"):
+        for name in ("GPF (innovation, likelihood)", "EKF"):
+            rows = report["cases"][case]["filters"][name]["position_rmse_km"]
+            assert len(rows) == 2 and all(_finite(r) for r in rows)
+    if pytest.importorskip("matplotlib"):
+        assert (tmp_path / "sweep_mismatch.png").stat().st_size > 10_000
+
+
+def test_cli_rejects_unknown_filter(tmp_path):
+    with pytest.raises(SystemExit):
+        montecarlo.main(["--runs", "1", "--filters", "KF9000", "--out", str(tmp_path)] + SHORT)
