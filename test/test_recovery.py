@@ -75,3 +75,15 @@ def test_collapse_recovery_off_by_default():
         f.predict(1.0)
         f.update(np.array([k + 1.0]))
     assert f.recoveries == 0
+
+
+@pytest.mark.parametrize("name", ["ExtendedKF", "UnscentedKF", "EnsembleKF"])
+def test_gaussian_filters_reinitialise_from_last_good_on_non_finite_prediction(name):
+    import gpf_nav.filters as filters
+    f = getattr(filters, name)(poisoned(-1e9), seed=0)
+    f.initialize(MEAN, COV)
+    f.predict(1.0)
+    assert f.recoveries == 1
+    assert np.all(np.isfinite(f.mean)) and np.all(np.isfinite(f.covariance))
+    f.update(np.array([0.3]))
+    assert np.all(np.isfinite(f.mean))

@@ -52,11 +52,24 @@ class Filter(ABC):
     def covariance(self) -> np.ndarray:
         """Posterior covariance ``(n, n)``."""
 
+    def _require_initialized(self) -> None:
+        if not self.initialized:
+            raise RuntimeError(f"{type(self).__name__}: call initialize() before predict() or update()")
+
     # --- recovery ----------------------------------------------------------------------------------------
     def _remember(self, mean: np.ndarray, cov: np.ndarray) -> None:
         """Keep ``(mean, cov)`` as the last good estimate, if it is finite."""
         if np.all(np.isfinite(mean)) and np.all(np.isfinite(cov)):
             self._last_good = (np.array(mean, dtype=float), np.array(cov, dtype=float))
+
+    def _guard(self) -> None:
+        """After a step of a Gaussian or ensemble filter: remember a healthy estimate, or recover
+        from one that is non-finite or has a negative variance."""
+        mean, cov = self.mean, self.covariance
+        if np.all(np.isfinite(mean)) and np.all(np.isfinite(cov)) and np.all(np.diag(cov) >= 0.0):
+            self._last_good = (np.array(mean), np.array(cov))
+        else:
+            self._recover("estimate became non-finite or its covariance indefinite")
 
     def _recover(self, reason: str) -> None:
         """Re-initialise from the last good estimate with its covariance times ``recovery_inflation``.

@@ -45,6 +45,7 @@ class EnsembleKF(Filter):
         z = self.rng.standard_normal(self._X.shape)
         self._X = mean + z @ psd_sqrt(cov).T
         self.last_log_likelihood = 0.0
+        self._remember(mean, cov)
         self.initialized = True
 
     def predict(self, dt: float, u: np.ndarray | None = None) -> None:
@@ -56,6 +57,7 @@ class EnsembleKF(Filter):
         X = self.model.transition(self._X, dt, self.time, u)
         self._X = X + self.rng.standard_normal(X.shape) @ self._noise.process_sqrt(dt).T
         self.time += dt
+        self._guard()
 
     def update(self, y: np.ndarray) -> None:
         """Condition on ``y`` ``(m,)``; NaN rows are not measured, an all-NaN ``y`` is a no-op."""
@@ -79,9 +81,14 @@ class EnsembleKF(Filter):
         scale = 1.0 / (self.n_particles - 1)
         Pyy = (Ay.T @ Ay) * scale + self._noise.measurement(mask)
         Pxy_t = (Ay.T @ Ax) * scale  # (k, n)
-        Kt, _, self.last_log_likelihood = innovation_solve(Pyy, Pxy_t, r)
+        try:
+            Kt, _, self.last_log_likelihood = innovation_solve(Pyy, Pxy_t, r)
+        except np.linalg.LinAlgError:
+            self._recover("innovation covariance not positive definite")
+            return
         innovations += self.rng.standard_normal(innovations.shape) @ self._noise.measurement_sqrt(mask).T
         self._X = X + innovations @ Kt
+        self._guard()
 
     @property
     def particles(self) -> np.ndarray:
@@ -99,7 +106,3 @@ class EnsembleKF(Filter):
         A = self._X - self._weights @ self._X
         P = (A.T @ A) / (self.n_particles - 1)
         return readonly_view(0.5 * (P + P.T))
-
-    def _require_initialized(self) -> None:
-        if not self.initialized:
-            raise RuntimeError("EnsembleKF: call initialize() before predict() or update()")

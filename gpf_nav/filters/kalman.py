@@ -111,6 +111,7 @@ class _GaussianFilter(Filter):
     def initialize(self, mean: np.ndarray, cov: np.ndarray) -> None:
         self._x, self._P = self._check_prior(mean, cov)
         self.last_log_likelihood = 0.0
+        self._remember(self._x, self._P)
         self.initialized = True
 
     @property
@@ -121,9 +122,6 @@ class _GaussianFilter(Filter):
     def covariance(self) -> np.ndarray:
         return readonly_view(self._P)
 
-    def _require_initialized(self) -> None:
-        if not self.initialized:
-            raise RuntimeError(f"{type(self).__name__}: call initialize() before predict() or update()")
 
 
 class ExtendedKF(_GaussianFilter):
@@ -149,6 +147,7 @@ class ExtendedKF(_GaussianFilter):
         P = F @ self._P @ F.T + self._noise.process(dt)
         self._P = 0.5 * (P + P.T)
         self.time += dt
+        self._guard()
 
     def update(self, y: np.ndarray) -> None:
         """Condition on ``y`` ``(m,)``; NaN rows are not measured, an all-NaN ``y`` is a no-op."""
@@ -167,12 +166,17 @@ class ExtendedKF(_GaussianFilter):
         P = self._P
         HP = H @ P
         S = HP @ H.T + R
-        Kt, _, self.last_log_likelihood = innovation_solve(S, HP, r)
+        try:
+            Kt, _, self.last_log_likelihood = innovation_solve(S, HP, r)
+        except np.linalg.LinAlgError:
+            self._recover("innovation covariance not positive definite")
+            return
         K = Kt.T
         self._x = self._x + K @ r
         A = self._eye - K @ H
         P = A @ P @ A.T + K @ R @ Kt
         self._P = 0.5 * (P + P.T)
+        self._guard()
 
 
 class UnscentedKF(_GaussianFilter):
@@ -248,6 +252,7 @@ class UnscentedKF(_GaussianFilter):
         P = self._spread(D, delta) + self._noise.process(dt)
         self._x, self._P = Y[0] + delta, 0.5 * (P + P.T)
         self.time += dt
+        self._guard()
 
     def update(self, y: np.ndarray) -> None:
         """Condition on ``y`` ``(m,)``; NaN rows are not measured, an all-NaN ``y`` is a no-op."""
@@ -269,7 +274,12 @@ class UnscentedKF(_GaussianFilter):
         S = self._spread(dZ, delta, mu) + self._noise.measurement(mask)
         # Cross-covariance (transposed, (k, n)); the delta term vanishes because sum_i wc_i E_i = 0.
         C = self._w * (dZ.T @ E)
-        Kt, s_r, self.last_log_likelihood = innovation_solve(S, C, r)
+        try:
+            Kt, s_r, self.last_log_likelihood = innovation_solve(S, C, r)
+        except np.linalg.LinAlgError:
+            self._recover("innovation covariance not positive definite")
+            return
         self._x = self._x + s_r @ C
         P = self._P - C.T @ Kt
         self._P = 0.5 * (P + P.T)
+        self._guard()

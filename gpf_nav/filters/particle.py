@@ -135,6 +135,7 @@ class ParticleFilter(Filter):
 
     # --- the loop ------------------------------------------------------------------------------------
     def predict(self, dt, u=None):
+        self._require_initialized()
         dt = self._check_dt(dt)
         if dt == 0.0:
             return
@@ -144,6 +145,7 @@ class ParticleFilter(Filter):
         self._discard_non_finite()
 
     def update(self, y):
+        self._require_initialized()
         y, rows = self._check_measurement(y)
         dt = self._pending_dt
         n = self.model.state_dim
