@@ -176,9 +176,10 @@ class ParticleFilter(Filter):
     def _discard_non_finite(self) -> bool:
         """Give non-finite particles zero weight (and a finite placeholder state); recover when none
         is left. Returns False when the filter had to re-initialise."""
-        bad = ~np.isfinite(self._x).all(axis=0)
-        if not bad.any():
+        column_sums = self._x.sum(axis=0)  # non-finite iff a component is (or the sum overflows)
+        if np.isfinite(column_sums).all():
             return True
+        bad = ~np.isfinite(column_sums)
         if bad.all():
             self._recover("every particle became non-finite")
             return False
@@ -252,11 +253,11 @@ class ParticleFilter(Filter):
 
     def _log_likelihood(self, x: np.ndarray, y: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """Gaussian ``log p(y_rows | x)`` ``(N,)`` for particles ``x`` ``(n, N)``."""
-        e = self.model.residual(y, self.model.measure(x.T))[:, rows]
+        e = self.model.residual(y, self.model.measure(x.T))
         w = self._whitener(rows)
-        ew = e @ w.T
-        log_det = -np.log(np.diag(w)).sum()
-        return -0.5 * np.einsum("ij,ij->i", ew, ew) - log_det - 0.5 * rows.sum() * np.log(2.0 * np.pi)
+        ew = w @ e.T[rows]  # (k, N)
+        constant = np.log(np.diag(w)).sum() - 0.5 * rows.sum() * np.log(2.0 * np.pi)
+        return constant - 0.5 * np.einsum("kn,kn->n", ew, ew)
 
     def _reweight(self, increment) -> bool:
         """Add the log-weight increment ``(N,)``, normalise, resample below ``tau N``.
