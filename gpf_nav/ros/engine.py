@@ -15,7 +15,9 @@ of ROS time. Rules:
   move the filter's own time: a measurement that arrives late (but newer than the last one) is used.
 * If the filter raises or its mean/covariance become non-finite, it is rebuilt from the last good
   estimate (covariance inflated), predicted to the failing stamp, and the event is counted
-  (``reinit_count``; diagnostics go to ERROR for ``reinit_hold`` s).
+  (``reinit_count``; diagnostics go to ERROR for ``reinit_hold`` s). A re-initialisation the core
+  filter does by itself (its ``recoveries`` counter: all particles non-finite or weightless, ESS
+  collapse with ``collapse_steps``) is counted and reported the same way.
 """
 from __future__ import annotations
 
@@ -76,6 +78,7 @@ class EstimatorEngine:
     def reset(self) -> None:
         """Back to the start-up state (counters are kept; they are cumulative)."""
         self.filter = self.factory()
+        self._core_recoveries = 0
         self.t_ns: int | None = None          # ROS time of the filter state
         self.last_measurement_ns: int | None = None
         self.last_update_ns: int | None = None
@@ -106,6 +109,7 @@ class EstimatorEngine:
     def _initialize(self, mean, cov, t_ns: int, source: str) -> None:
         self.filter = self.factory()
         self.filter.initialize(mean, cov)
+        self._core_recoveries = getattr(self.filter, "recoveries", 0)
         self.t_ns = int(t_ns)
         self.init_source = source
         self._init_buffer = []
@@ -160,9 +164,18 @@ class EstimatorEngine:
             self._recover(stamp_ns, "non-finite mean or covariance after the update")
             self.counters.reject(stream, "filter_error")
             return False, "filter_error"
+        self._check_core_recovery()
         self.last_update_ns = stamp_ns
         self.counters.accept(stream)
         return True, ""
+
+    def _check_core_recovery(self) -> None:
+        recoveries = getattr(self.filter, "recoveries", 0)
+        if recoveries > self._core_recoveries:
+            self.reinit_count += recoveries - self._core_recoveries
+            self.last_reinit_reason = f"core filter recovery: {getattr(self.filter, 'last_recovery_reason', '')}"
+            self._last_reinit_time = self.monotonic()
+        self._core_recoveries = recoveries
 
     def _buffer(self, stamp_ns: int, y: np.ndarray, stream: str) -> tuple[bool, str]:
         self._init_buffer.append((stamp_ns, y))

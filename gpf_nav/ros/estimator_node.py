@@ -141,7 +141,8 @@ class EstimatorNode(Node):
     def _filter_options(self) -> dict:
         p = self.params
         return dict(n_particles=p["n_particles"], seed=p["seed"], reference=p["reference"],
-                    weighting=p["weighting"], regularization=p["regularization"],
+                    weighting=p["weighting"], metric=p["metric"], regularization=p["regularization"],
+                    collapse_steps=p["collapse_steps"],
                     resampling=p["resampling"], ess_threshold=p["ess_threshold"],
                     compute_costate=p["compute_costate"], ukf_alpha=p["ukf_alpha"],
                     ukf_beta=p["ukf_beta"], ukf_kappa=p["ukf_kappa"])

@@ -17,8 +17,8 @@ PARTICLE_FILTERS = ("gpf", "spf")
 
 def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 0,
                 reference: str = "innovation", weighting: str = "likelihood",
-                regularization: float = 1e-6, resampling: str = "systematic",
-                ess_threshold: float = 0.5, compute_costate: bool = True,
+                metric: str = "euclidean", regularization: float = 1e-6, collapse_steps: int = 0,
+                resampling: str = "systematic", ess_threshold: float = 0.5, compute_costate: bool = True,
                 ukf_alpha: float = 1e-3, ukf_beta: float = 2.0, ukf_kappa: float = 0.0):
     """Build the filter called ``name`` (one of :data:`FILTERS`) on ``model``.
 
@@ -28,21 +28,22 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
     errors = check_filter_options(name, n_particles=n_particles, reference=reference,
                                   weighting=weighting, regularization=regularization,
                                   resampling=resampling, ess_threshold=ess_threshold,
-                                  ukf_alpha=ukf_alpha, ukf_kappa=ukf_kappa,
-                                  state_dim=model.state_dim)
+                                  metric=metric, collapse_steps=collapse_steps, ukf_alpha=ukf_alpha,
+                                  ukf_kappa=ukf_kappa, state_dim=model.state_dim)
     if errors:
         raise ValueError("; ".join(errors))
     seed = None if seed is None or int(seed) < 0 else int(seed)
     if name == "gpf":
         from gpf_nav.filters import GeometricProjectionPF
         return GeometricProjectionPF(model, int(n_particles), reference=reference, weighting=weighting,
-                                     regularization=regularization, resampling=resampling,
-                                     ess_threshold=ess_threshold, seed=seed)
+                                     metric=metric, regularization=regularization, resampling=resampling,
+                                     ess_threshold=ess_threshold, seed=seed,
+                                     collapse_steps=int(collapse_steps))
     if name == "spf":
         from gpf_nav.filters import BootstrapPF
         return BootstrapPF(model, int(n_particles), resampling=resampling, ess_threshold=ess_threshold,
                            seed=seed, compute_costate=bool(compute_costate),
-                           regularization=regularization)
+                           regularization=regularization, collapse_steps=int(collapse_steps))
     cls = _core_class({"ekf": "ExtendedKF", "ukf": "UnscentedKF", "enkf": "EnsembleKF"}[name])
     if name == "ekf":
         return cls(model, seed=seed)
@@ -69,10 +70,11 @@ def _core_class(class_name: str):
 
 
 def check_filter_options(name, *, n_particles, reference, weighting, regularization, resampling,
-                         ess_threshold, ukf_alpha=1e-3, ukf_kappa=0.0, state_dim=6) -> list[str]:
+                         ess_threshold, metric="euclidean", collapse_steps=0, ukf_alpha=1e-3,
+                         ukf_kappa=0.0, state_dim=6) -> list[str]:
     """Human-readable errors for invalid filter parameters (empty when all are valid)."""
     from gpf_nav import resampling as resamplers
-    from gpf_nav.filters.gpf import REFERENCES, WEIGHTINGS
+    from gpf_nav.filters.gpf import METRICS, REFERENCES, WEIGHTINGS
     errors = []
     if name not in FILTERS:
         errors.append(f"parameter 'filter' = {name!r} is not a known filter; choose one of {', '.join(FILTERS)}")
@@ -89,11 +91,15 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
                           f"{', '.join(sorted(resamplers.SCHEMES))}")
         if not (math.isfinite(regularization) and regularization > 0.0):
             errors.append(f"parameter 'regularization' = {regularization!r} must be positive")
+        if not isinstance(collapse_steps, (int, np.integer)) or collapse_steps < 0:
+            errors.append(f"parameter 'collapse_steps' = {collapse_steps!r} must be an integer >= 0")
     if name == "gpf":
         if reference not in REFERENCES:
             errors.append(f"parameter 'reference' = {reference!r} must be one of {', '.join(REFERENCES)}")
         if weighting not in WEIGHTINGS:
             errors.append(f"parameter 'weighting' = {weighting!r} must be one of {', '.join(WEIGHTINGS)}")
+        if metric not in METRICS:
+            errors.append(f"parameter 'metric' = {metric!r} must be one of {', '.join(METRICS)}")
     if name == "ukf":
         if not ukf_alpha > 0.0:
             errors.append(f"parameter 'ukf_alpha' = {ukf_alpha!r} must be positive")
