@@ -1,0 +1,218 @@
+"""Node-latency benchmark: measurement message published -> matching ``odometry/filtered`` received.
+
+    gpf-nav bench --node [--rates 10,50,200] [--particles 500,10000] [--seconds 5] [--json]
+    python -m gpf_nav.ros.latency ...
+
+For each particle count the estimator runs as a separate process (``python -m
+gpf_nav.ros.estimator_node``, the same code as the installed ``estimator``), initialised from the
+scenario prior, with ``publish_rate: 0`` (no timer predictions, so the only odometry is the update's).
+A publisher thread in this process sends the scenario's ``measurements/rae`` at each input rate
+(best-effort QoS, as a sensor would) with stamps that advance by the scenario step but lie in the
+past, so the filter sees the real 2 s dynamics while messages arrive at 10, 50 or 200 Hz. Latency is
+the wall time from ``publish()`` to the reception of the odometry carrying the same stamp, both taken
+in this process. Reported per rate: p50, p99, max, the fraction of measurements answered, and
+``backlog_growth_ms`` = median latency of the last quarter minus that of the first quarter (a queue
+that grows shows as a large positive value; a full best-effort queue sheds messages instead, which
+shows as ``answered`` < 1).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+
+DEFAULT_RATES = (10.0, 50.0, 200.0)
+DEFAULT_PARTICLES = (500, 10000)
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="gpf-nav bench --node", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--rates", default=",".join(f"{r:g}" for r in DEFAULT_RATES),
+                    help="input rates in Hz, comma-separated (default 10,50,200)")
+    ap.add_argument("--particles", default=",".join(str(n) for n in DEFAULT_PARTICLES),
+                    help="particle counts, comma-separated (default 500,10000)")
+    ap.add_argument("--seconds", type=float, default=5.0, help="wall seconds of input per rate (default 5)")
+    ap.add_argument("--filter", default="gpf", help="estimator filter (default gpf)")
+    ap.add_argument("--warmup", type=int, default=20, help="messages sent (at 10 Hz) and discarded first")
+    ap.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: the environment's)")
+    ap.add_argument("--json", action="store_true", help="print the results as JSON")
+    return ap
+
+
+class _Bench:
+    """A node that publishes measurements and records reply latencies."""
+
+    def __init__(self, context, node):
+        from geometry_msgs.msg import Vector3Stamped
+        from nav_msgs.msg import Odometry
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        self.node = node
+        self.sent: dict[int, float] = {}
+        self.received: dict[int, float] = {}
+        self._lock = threading.Lock()
+        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+        self.pub = node.create_publisher(Vector3Stamped, "measurements/rae", qos)
+        node.create_subscription(Odometry, "odometry/filtered", self._on_odom, 100)
+        self.msg_type = Vector3Stamped
+
+    def _on_odom(self, msg) -> None:
+        t = time.perf_counter()
+        ns = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+        with self._lock:
+            self.received.setdefault(ns, t)
+
+    def send(self, stamp_ns: int, y) -> None:
+        from gpf_nav.ros.conversions import vector3_stamped
+        msg = vector3_stamped(y, stamp_ns, "station")
+        with self._lock:
+            self.sent[stamp_ns] = time.perf_counter()
+        self.pub.publish(msg)
+
+
+def _pace(bench: _Bench, items, rate: float, stop: threading.Event) -> None:
+    """Publish ``items`` ``[(stamp_ns, y)]`` at ``rate`` Hz (absolute schedule, no drift)."""
+    period = 1.0 / rate
+    start = time.perf_counter()
+    for i, (stamp, y) in enumerate(items):
+        if stop.is_set():
+            return
+        delay = start + i * period - time.perf_counter()
+        if delay > 0:
+            time.sleep(delay)
+        bench.send(stamp, y)
+
+
+def _stats(bench: _Bench, stamps: list[int]) -> dict:
+    lat = []
+    for s in stamps:
+        if s in bench.received and s in bench.sent:
+            lat.append((bench.received[s] - bench.sent[s]) * 1e3)
+    out = {"sent": len(stamps), "answered": round(len(lat) / max(1, len(stamps)), 4)}
+    if lat:
+        a = np.array(lat)
+        q = max(1, len(a) // 4)
+        out.update(p50_ms=round(float(np.percentile(a, 50)), 3), p99_ms=round(float(np.percentile(a, 99)), 3),
+                   max_ms=round(float(a.max()), 3),
+                   backlog_growth_ms=round(float(np.median(a[-q:]) - np.median(a[:q])), 3))
+    return out
+
+
+def run(args) -> list[dict]:
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from gpf_nav.scenario import ScenarioConfig, generate
+
+    rates = [float(r) for r in str(args.rates).split(",") if r]
+    particles = [int(n) for n in str(args.particles).split(",") if n]
+    env = dict(os.environ)
+    if args.domain_id is not None:
+        env["ROS_DOMAIN_ID"] = str(args.domain_id)
+    counts = [max(10, int(round(r * args.seconds))) for r in rates]
+    total = args.warmup + sum(counts)
+    config = ScenarioConfig(duration=min(3000.0, 2.0 * (total + 5)))
+    scenario = generate(config, 0)
+    if len(scenario.times) < total:
+        raise SystemExit(f"too many messages for one scenario ({total} > {len(scenario.times)}); "
+                         "lower --seconds or the rates")
+
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context, domain_id=args.domain_id)
+    results = []
+    try:
+        for n in particles:
+            results.extend(_run_one(context, env, scenario, n, rates, counts, args))
+    finally:
+        rclpy.try_shutdown(context=context)
+    return results
+
+
+def _run_one(context, env, scenario, n, rates, counts, args) -> list[dict]:
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    # stamps in the past: the estimator's future-stamp check never triggers and its clock is irrelevant
+    now_ns = time.time_ns()
+    base = now_ns - int((scenario.times[-1] + 60.0) * 1e9)
+    stamps = [base + int(round(t * 1e9)) for t in scenario.times]
+    prior_std = np.sqrt(np.diag(scenario.prior_cov))
+    cmd = [sys.executable, "-m", "gpf_nav.ros.estimator_node", "--ros-args",
+           "-p", f"filter:={args.filter}", "-p", f"n_particles:={n}", "-p", "publish_rate:=0.0",
+           "-p", "initial_state:=[" + ",".join(repr(float(v)) for v in scenario.prior_mean) + "]",
+           "-p", "initial_std:=[" + ",".join(repr(float(v)) for v in prior_std) + "]",
+           "-p", f"initial_stamp:={base * 1e-9!r}", "-p", "max_measurement_rate:=0.0",
+           "-p", "max_published_particles:=0", "--log-level", "warn"]
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    node = rclpy.create_node("gpf_latency_bench", context=context)
+    bench = _Bench(context, node)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    stop = threading.Event()
+    results = []
+    try:
+        deadline = time.monotonic() + 60.0
+        while time.monotonic() < deadline and (bench.pub.get_subscription_count() == 0
+                                               or node.count_publishers("odometry/filtered") == 0):
+            if proc.poll() is not None:
+                raise RuntimeError(f"estimator exited early: {proc.stderr.read()}")
+            executor.spin_once(timeout_sec=0.1)
+        time.sleep(0.5)
+        cursor = 0
+        plan = [("warmup", 10.0, args.warmup)] + [(r, r, c) for r, c in zip(rates, counts)]
+        for label, rate, count in plan:
+            items = [(stamps[cursor + i], scenario.measurements[cursor + i]) for i in range(count)
+                     if np.any(np.isfinite(scenario.measurements[cursor + i]))]
+            cursor += count
+            thread = threading.Thread(target=_pace, args=(bench, items, rate, stop), daemon=True)
+            thread.start()
+            while thread.is_alive():
+                executor.spin_once(timeout_sec=0.01)
+            drain = time.monotonic() + 1.0 + 0.05 * n / 500
+            while time.monotonic() < drain:
+                executor.spin_once(timeout_sec=0.01)
+            if label != "warmup":
+                row = {"filter": args.filter, "particles": n, "rate_hz": rate}
+                row.update(_stats(bench, [s for s, _ in items]))
+                results.append(row)
+    finally:
+        stop.set()
+        executor.shutdown()
+        node.destroy_node()
+        proc.terminate()
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+    return results
+
+
+def format_table(results: list[dict]) -> str:
+    head = f"{'filter':6} {'N':>6} {'rate':>6} {'sent':>5} {'answered':>8} {'p50 ms':>8} {'p99 ms':>8} " \
+           f"{'max ms':>8} {'growth ms':>9}"
+    lines = [head, "-" * len(head)]
+    for r in results:
+        lines.append(f"{r['filter']:6} {r['particles']:>6} {r['rate_hz']:>6g} {r['sent']:>5} "
+                     f"{r['answered']:>8.3f} {r.get('p50_ms', float('nan')):>8.2f} "
+                     f"{r.get('p99_ms', float('nan')):>8.2f} {r.get('max_ms', float('nan')):>8.2f} "
+                     f"{r.get('backlog_growth_ms', float('nan')):>9.2f}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    results = run(args)
+    if args.json:
+        print(json.dumps(results, indent=2))
+    else:
+        print(format_table(results))
+    return 0 if results and all(r["answered"] > 0 for r in results) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
