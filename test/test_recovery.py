@@ -53,8 +53,9 @@ def test_impossible_measurement_reinitialises_from_last_good(cls):
     f = cls(constant_velocity_model(), n_particles=100, seed=0)
     f.initialize(MEAN, COV)
     f.predict(1.0)
-    f.update(np.array([1e300]))  # squared residual overflows: every log-weight is -inf
-    assert f.recoveries == 1 and "weight" in f.last_recovery_reason
+    f.update(np.array([1e300]))  # squared residual overflows (the GPF even projects onto it)
+    assert f.recoveries == 1
+    assert "weight" in f.last_recovery_reason or "non-finite" in f.last_recovery_reason
     assert np.all(np.isfinite(f.mean)) and np.all(np.isfinite(f.covariance))
     assert np.trace(f.covariance) > np.trace(COV)  # inflated
 

@@ -24,6 +24,8 @@ from gpf_nav.linalg import cholesky_or_none, psd_sqrt
 from gpf_nav.models.base import StateSpaceModel
 
 
+STATE_LIMIT = 1e150
+"""Particles with a component sum beyond this magnitude are treated as non-finite."""
 _REMEMBER_EVERY = 10
 """Updates between two snapshots of the last good estimate (a weighted covariance costs O(N n^2))."""
 
@@ -175,11 +177,12 @@ class ParticleFilter(Filter):
 
     def _discard_non_finite(self) -> bool:
         """Give non-finite particles zero weight (and a finite placeholder state); recover when none
-        is left. Returns False when the filter had to re-initialise."""
-        column_sums = self._x.sum(axis=0)  # non-finite iff a component is (or the sum overflows)
-        if np.isfinite(column_sums).all():
+        is left. A particle beyond ``STATE_LIMIT`` counts as non-finite: its covariance would overflow.
+        Returns False when the filter had to re-initialise."""
+        column_sums = np.abs(self._x.sum(axis=0))  # NaN or beyond the limit iff a component is (about)
+        if (column_sums < STATE_LIMIT).all():
             return True
-        bad = ~np.isfinite(column_sums)
+        bad = ~(column_sums < STATE_LIMIT)
         if bad.all():
             self._recover("every particle became non-finite")
             return False

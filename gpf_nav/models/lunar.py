@@ -20,6 +20,8 @@ MU_MOON = 4.9028e12
 MOON_RADIUS = 1.7374e6
 """Mean lunar radius, m."""
 
+MAX_SUBSTEPS = 1000
+"""Cap on the integration sub-steps of one :meth:`LunarDescentModel.transition` call."""
 _MIN_RANGE_SQ = 1.0  # m^2: floor that keeps h and H finite with the vehicle at the station
 _MIN_HORIZONTAL_SQ = 1e-6  # m^2: floor for the azimuth derivative at elevation +-pi/2
 
@@ -70,14 +72,19 @@ class LunarDescentModel(StateSpaceModel):
             a += u.T if u.ndim == 2 else u[:, None]
         return a
 
+    def _substeps(self, dt: float) -> int:
+        """Sub-steps of at most ``max_step``, capped at ``MAX_SUBSTEPS`` (a huge ``dt`` gets coarser
+        steps rather than an unbounded loop)."""
+        return min(MAX_SUBSTEPS, max(1, math.ceil(abs(dt) / self.max_step)))
+
     def drift(self, x, t=0.0, u=None):
         xt = x.T
         return np.concatenate([xt[3:], self._acceleration(xt[:3], _as_input(u))]).T
 
     def transition(self, x, dt, t=0.0, u=None):
-        """Kick-drift-kick leapfrog (second order, symplectic) in sub-steps of at most ``max_step``."""
+        """Kick-drift-kick leapfrog (second order, symplectic) in :meth:`_substeps` sub-steps."""
         u = _as_input(u)
-        steps = max(1, math.ceil(abs(dt) / self.max_step))
+        steps = self._substeps(dt)
         h = dt / steps
         xt = x.T
         r, v = xt[:3].copy(), xt[3:].copy()
@@ -98,7 +105,7 @@ class LunarDescentModel(StateSpaceModel):
 
     def transition_jacobian(self, x, dt, t=0.0, u=None):
         """Second-order Taylor ``I + A h + (A h)^2 / 2`` chained over the sub-steps of :meth:`transition`."""
-        steps = max(1, math.ceil(abs(dt) / self.max_step))
+        steps = self._substeps(dt)
         h = dt / steps
         n = x.shape[0]
         phi = np.broadcast_to(np.eye(6), (n, 6, 6)).copy()

@@ -1,0 +1,118 @@
+"""Property-based fault tests of the core: whatever the model, input or geometry, ``predict`` and
+``update`` raise nothing but the documented ``ValueError`` (malformed shapes, negative or non-finite
+``dt``) and never leave a non-finite mean or covariance."""
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from gpf_nav.filters import BootstrapPF, EnsembleKF, ExtendedKF, GeometricProjectionPF, UnscentedKF
+from gpf_nav.models import MOON_RADIUS, MU_MOON, LinearGaussianModel, LunarDescentModel
+
+FILTERS = {
+    "gpf": lambda model, seed: GeometricProjectionPF(model, 64, seed=seed),
+    "gpf-exact": lambda model, seed: GeometricProjectionPF(model, 64, weighting="corrected",
+                                                           metric="process_noise", regularization=1.0,
+                                                           seed=seed),
+    "gpf-increment": lambda model, seed: GeometricProjectionPF(model, 64, reference="increment", seed=seed),
+    "spf": lambda model, seed: BootstrapPF(model, 64, seed=seed, compute_costate=True, collapse_steps=3),
+    "ekf": lambda model, seed: ExtendedKF(model, seed=seed),
+    "ukf": lambda model, seed: UnscentedKF(model, seed=seed),
+    "enkf": lambda model, seed: EnsembleKF(model, 64, seed=seed),
+}
+SETTINGS = settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+
+values = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.floats(-1e6, 1e6),
+    st.sampled_from([0.0, -1.0, np.pi, -np.pi, np.pi / 2, 1e300, -1e300, 5e-324]),
+)
+dts = st.one_of(st.sampled_from([0.0, 1e-9, 1.0, 2.0, 1e4, 1e7, 1e12]), st.floats(0.0, 100.0))
+
+
+def assert_finite(f):
+    assert np.all(np.isfinite(f.mean)), f.mean
+    assert np.all(np.isfinite(f.covariance)), f.covariance
+
+
+def lunar_prior():
+    r0 = MOON_RADIUS + 100e3
+    return np.array([r0, 0.0, 0.0, 0.0, np.sqrt(MU_MOON / r0), 0.0]), np.diag([1e6] * 3 + [1.0] * 3)
+
+
+@pytest.mark.parametrize("name", sorted(FILTERS))
+@SETTINGS
+@given(steps=st.lists(st.tuples(dts, st.lists(values, min_size=3, max_size=3)), min_size=1, max_size=6),
+       seed=st.integers(0, 2 ** 32 - 1))
+def test_lunar_filters_survive_arbitrary_measurements_and_steps(name, steps, seed):
+    f = FILTERS[name](LunarDescentModel(), seed)
+    f.initialize(*lunar_prior())
+    for dt, y in steps:
+        f.predict(dt)
+        assert_finite(f)
+        f.update(np.array(y))
+        assert_finite(f)
+
+
+DEGENERATE_STATES = [
+    np.zeros(6),                                             # the vehicle at the station
+    np.array([0.0, 0.0, MOON_RADIUS, 100.0, 0.0, 0.0]),      # elevation +pi/2: azimuth undefined
+    np.array([0.0, 0.0, -MOON_RADIUS, 0.0, 100.0, 0.0]),     # elevation -pi/2
+    np.array([1e-3, 0.0, 0.0, 0.0, 0.0, 0.0]),               # almost zero range
+]
+
+
+@pytest.mark.parametrize("name", sorted(FILTERS))
+@pytest.mark.parametrize("state", range(len(DEGENERATE_STATES)))
+def test_degenerate_geometry_stays_finite(name, state):
+    f = FILTERS[name](LunarDescentModel(), 0)
+    f.initialize(DEGENERATE_STATES[state], np.diag([1.0] * 3 + [0.01] * 3))
+    for y in ([0.0, 0.0, 0.0], [0.0, np.nan, np.pi / 2], [10.0, 3.0, -np.pi / 2], [np.nan] * 3):
+        f.predict(1.0)
+        f.update(np.array(y))
+        assert_finite(f)
+
+
+@st.composite
+def linear_models(draw):
+    n = draw(st.integers(1, 4))
+    m = draw(st.integers(1, 3))
+    entries = st.floats(-3.0, 3.0)
+    A = np.array(draw(st.lists(entries, min_size=n * n, max_size=n * n))).reshape(n, n)
+    G = np.array(draw(st.lists(entries, min_size=n * n, max_size=n * n))).reshape(n, n)
+    C = np.array(draw(st.lists(entries, min_size=m * n, max_size=m * n))).reshape(m, n)
+    r = np.array(draw(st.lists(st.floats(-2.0, 2.0), min_size=m * m, max_size=m * m))).reshape(m, m)
+    R = r @ r.T + draw(st.floats(1e-6, 10.0)) * np.eye(m)
+    angular = np.array(draw(st.lists(st.booleans(), min_size=m, max_size=m)))
+    return LinearGaussianModel(A, G, C, R, angular=angular)
+
+
+@pytest.mark.parametrize("name", sorted(FILTERS))
+@SETTINGS
+@given(model=linear_models(), seed=st.integers(0, 2 ** 16),
+       ys=st.lists(st.lists(values, min_size=3, max_size=3), min_size=1, max_size=5),
+       dt=st.sampled_from([0.0, 0.1, 1.0, 5.0]))
+def test_random_linear_models(name, model, seed, ys, dt):
+    f = FILTERS[name](model, seed)
+    n, m = model.state_dim, model.measurement_dim
+    f.initialize(np.zeros(n), np.eye(n))
+    for y in ys:
+        f.predict(dt)
+        assert_finite(f)
+        f.update(np.array(y[:m]))
+        assert_finite(f)
+
+
+@pytest.mark.parametrize("name", sorted(FILTERS))
+def test_malformed_input_raises_value_error_only(name):
+    f = FILTERS[name](LunarDescentModel(), 0)
+    with pytest.raises(ValueError):
+        f.initialize(np.zeros(5), np.eye(6))
+    f.initialize(*lunar_prior())
+    for bad_dt in (-1.0, np.nan, np.inf):
+        with pytest.raises(ValueError):
+            f.predict(bad_dt)
+    for bad_y in (np.zeros(2), np.zeros((3, 1)), np.zeros(4)):
+        with pytest.raises(ValueError):
+            f.update(bad_y)
+    assert_finite(f)
