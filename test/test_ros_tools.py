@@ -1,0 +1,55 @@
+"""``gpf-nav demo`` and the node-latency benchmark, run small, on private DDS domains."""
+import json
+import math
+import os
+import random
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("rclpy")
+
+ROOT = Path(__file__).resolve().parents[1]
+_DOMAINS = iter(random.Random(os.getpid() ^ time.time_ns() ^ 0x5EED).sample(range(110, 230), 20))
+
+
+@pytest.fixture
+def private_domain(monkeypatch):
+    domain = next(_DOMAINS)
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    return domain
+
+
+def test_demo_runs_end_to_end_and_prints_a_summary(private_domain, capsys):
+    from gpf_nav.cli import main
+    code = main(["demo", "--duration", "80", "--rate-factor", "20", "--json"])
+    out = capsys.readouterr().out
+    summary = json.loads(out[out.index("{"):])
+    assert code == 0, summary
+    assert summary["completed"] and summary["measurements_published"] == 40
+    assert summary["measurements_processed"] >= 35
+    assert summary["compared_with_truth"] >= 35
+    assert math.isfinite(summary["position_rmse_m"]) and summary["position_rmse_m"] < 10e3
+    assert math.isfinite(summary["velocity_rmse_mps"]) and 0.0 < summary["mean_ess"] <= 1.0
+
+
+def test_demo_text_summary(private_domain, capsys):
+    from gpf_nav.ros.demo import main
+    assert main(["--duration", "40", "--rate-factor", "20", "--filter", "ekf"]) == 0
+    out = capsys.readouterr().out
+    assert "position RMSE vs truth" in out and "mean ESS/N" in out and "n/a" in out
+
+
+def test_latency_benchmark_small(private_domain):
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    result = subprocess.run([sys.executable, "-m", "gpf_nav.ros.latency", "--rates", "20", "--particles", "200",
+                             "--seconds", "1.5", "--warmup", "5", "--json"], env=env, capture_output=True,
+                            text=True, timeout=240)
+    assert result.returncode == 0, result.stderr[-3000:]
+    rows = json.loads(result.stdout)
+    assert len(rows) == 1 and rows[0]["particles"] == 200 and rows[0]["rate_hz"] == 20.0
+    assert rows[0]["answered"] > 0.8 and 0 < rows[0]["p50_ms"] <= rows[0]["p99_ms"]
