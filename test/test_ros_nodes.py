@@ -342,3 +342,16 @@ def test_simulator_refuses_rate_factor_without_clock(ros):
     with pytest.raises(ParameterError, match="publish_clock"):
         SimulatorNode(context=ros.context, parameter_overrides=[
             Parameter("publish_clock", value=False), Parameter("rate_factor", value=5.0)])
+
+
+def test_simulator_loops_with_increasing_stamps(ros):
+    rae = ros.record(Vector3Stamped, "measurements/rae")
+    sim = ros.add(SimulatorNode(context=ros.context, parameter_overrides=[
+        Parameter("rate_factor", value=40.0), Parameter("scenario.duration", value=20.0),
+        Parameter("loop", value=True), Parameter("start_delay", value=0.5), Parameter("seed", value=5)]))
+    assert ros.spin_until(lambda: len(rae) >= 25, 30.0)
+    assert not sim.finished
+    stamps = [conv.stamp_to_ns(m.header.stamp) for m in rae]
+    assert all(b > a for a, b in zip(stamps, stamps[1:]))
+    first, second = rae[0].vector, rae[10].vector  # the same trajectory point, one lap later
+    assert (first.x, first.y, first.z) == (second.x, second.y, second.z)

@@ -152,7 +152,11 @@ def _print(summary: dict) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if args.case == "partial" and args.init == "measurements":
+        parser.error("--init measurements needs range, azimuth and elevation (--case full); "
+                     "the partial case never measures azimuth")
     summary = run(args)
     if args.json:
         print(json.dumps(summary, indent=2))
