@@ -239,6 +239,15 @@ def test_engine_initialises_from_measurements():
     assert np.linalg.norm(eng.mean[:3] - s.truth[6, :3]) < 5e3
 
 
+def test_engine_says_why_it_cannot_initialise_without_azimuth():
+    s = generate(ScenarioConfig(duration=60.0, case="partial"), 4)
+    eng, _ = _engine(s, initial=False, init_window=3)
+    for k in range(6):
+        assert eng.measurement(_stamp(s, k), s.measurements[k], None) == (True, "buffered")
+    assert not eng.initialized and eng.init_failures == 4
+    assert "range, azimuth and elevation" in eng.waiting_for()
+
+
 def test_engine_imu_zero_order_hold_uses_samples_before_the_stamp():
     s = generate(SHORT, 5)
     eng, _ = _engine(s)

@@ -88,6 +88,7 @@ class EstimatorEngine:
         self._good: tuple[np.ndarray, np.ndarray, int] | None = None
         self._imu: deque[tuple[int, np.ndarray]] = deque(maxlen=256)
         self._init_buffer: list[tuple[int, np.ndarray]] = []
+        self.init_failures = 0                # batch fits that did not determine the state
         self._shadow = None
         self._shadow_version = -1
         self._shadow_ns = None
@@ -193,11 +194,21 @@ class EstimatorEngine:
             except (ValueError, FloatingPointError, np.linalg.LinAlgError):
                 fit = None
         if fit is None:
+            self.init_failures += 1
             self._init_buffer = self._init_buffer[-(window - 1):]  # slide the window
             return True, "buffered"
         self._initialize(fit[0], fit[1], stamp_ns, "measurements")
         self.last_update_ns = stamp_ns
         return True, ""
+
+    def waiting_for(self) -> str:
+        """What the uninitialised engine waits for, in words (for the node's periodic warning)."""
+        buffered, window = len(self._init_buffer), max(2, int(self.config.init_window))
+        text = f"waiting for set_pose or measurements ({buffered}/{window} buffered)"
+        if self.init_failures:
+            text += (f"; the batch fit failed {self.init_failures} times: it needs at least two "
+                     "measurements with range, azimuth and elevation (set initial_state or send set_pose)")
+        return text
 
     def imu(self, stamp_ns: int, specific_force_world: np.ndarray, now_ns: int | None) -> tuple[bool, str]:
         """Hold a world-frame specific force ``(3,)`` [m/s^2] from ``stamp_ns`` on."""

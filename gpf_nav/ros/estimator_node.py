@@ -335,10 +335,7 @@ class EstimatorNode(Node):
             t = time.monotonic()
             if t - self._last_log.get("_not_initialized", -math.inf) >= LOG_THROTTLE:
                 self._last_log["_not_initialized"] = t
-                buffered = len(self.engine._init_buffer)
-                self.get_logger().warning(
-                    "filter not initialised: no odometry yet; waiting for set_pose or measurements "
-                    f"({buffered}/{self.params['init_window']} buffered)")
+                self.get_logger().warning(f"filter not initialised: no odometry yet; {self.engine.waiting_for()}")
 
 
 def main(argv: list[str] | None = None) -> int:
