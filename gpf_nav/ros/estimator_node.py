@@ -117,10 +117,11 @@ class EstimatorNode(Node):
                                 depth=p["queue_depth"], durability=DurabilityPolicy.VOLATILE)
         reliable = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                               depth=10)
-        self.create_subscription(Vector3Stamped, "measurements/rae", self._on_rae, sensor_qos)
-        self.create_subscription(Range, "measurements/range", self._on_range, sensor_qos)
-        self.create_subscription(Imu, "imu", self._on_imu, sensor_qos)
-        self.create_subscription(PoseWithCovarianceStamped, "set_pose", self._on_set_pose, reliable)
+        self.create_subscription(Vector3Stamped, "measurements/rae", self._guard("rae", self._on_rae), sensor_qos)
+        self.create_subscription(Range, "measurements/range", self._guard("range", self._on_range), sensor_qos)
+        self.create_subscription(Imu, "imu", self._guard("imu", self._on_imu), sensor_qos)
+        self.create_subscription(PoseWithCovarianceStamped, "set_pose", self._guard("set_pose", self._on_set_pose),
+                                 reliable)
         self.odom_pub = self.create_publisher(Odometry, "odometry/filtered", reliable)
         self.ess_pub = self.create_publisher(Float64, "gpf/ess", reliable)
         self.costate_pub = self.create_publisher(Vector3Stamped, "gpf/costate", reliable)
@@ -176,6 +177,16 @@ class EstimatorNode(Node):
         if now - self._last_log.get(reason, -math.inf) >= LOG_THROTTLE:
             self._last_log[reason] = now
             self.get_logger().warning(f"dropped {stream} message: {reason}: {detail} ({n} so far)")
+
+    def _guard(self, stream: str, callback):
+        """``callback`` with a last-resort net: an unexpected exception is counted and logged, never
+        propagated into the executor (which would stop the node)."""
+        def guarded(msg):
+            try:
+                callback(msg)
+            except Exception as err:  # noqa: BLE001
+                self._refuse(stream, "internal_error", f"{type(err).__name__}: {err}")
+        return guarded
 
     def _check_header(self, stream: str, header, frame: str) -> int | None:
         """Stamp in ns, or None after refusing the message."""

@@ -20,6 +20,7 @@ the counts in ``/diagnostics`` (see ``docs/ros.md``). The reasons are:
 ``not_initialized``          arrived before the filter could be initialised and not usable for it
 ``no_velocity``              ``set_pose`` before any velocity is known (no estimate, no parameter)
 ``filter_error``             the filter raised or produced a non-finite estimate (then re-initialised)
+``internal_error``           any other exception in a callback (logged with its message; the node goes on)
 ===========================  =====================================================================
 """
 from __future__ import annotations
@@ -30,7 +31,7 @@ from collections import Counter
 REASONS = (
     "bad_stamp", "wrong_frame", "non_finite", "no_measured_component", "non_positive_range",
     "range_out_of_limits", "angle_out_of_range", "non_unit_quaternion", "not_provided", "stale_stamp",
-    "future_stamp", "rate_limit", "not_initialized", "no_velocity", "filter_error",
+    "future_stamp", "rate_limit", "not_initialized", "no_velocity", "filter_error", "internal_error",
 )
 
 OK = (True, "")
