@@ -108,8 +108,9 @@ class EstimatorEngine:
         return self.monotonic() - self._last_reinit_time < self.config.reinit_hold
 
     def _initialize(self, mean, cov, t_ns: int, source: str) -> None:
-        self.filter = self.factory()
-        self.filter.initialize(mean, cov)
+        fresh = self.factory()
+        fresh.initialize(mean, cov)  # may raise: then nothing has changed
+        self.filter = fresh
         self._core_recoveries = getattr(self.filter, "recoveries", 0)
         self.t_ns = int(t_ns)
         self.init_source = source
