@@ -104,8 +104,8 @@ def _stats(bench: _Bench, stamps: list[int]) -> dict:
 
 
 def run(args) -> list[dict]:
+    """Benchmark every particle count and rate of ``args``; one result row per pair."""
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
 
     from gpf_nav.scenario import ScenarioConfig, generate
 
