@@ -17,27 +17,38 @@ mean co-state of the latest ``window`` samples with the spread of the means of e
 length (batch means), with a Hotelling ``T^2`` test:
 
 * ``m`` = mean of the last ``window`` samples (the test window), ``(p,)``;
-* ``b_1 .. b_B`` = means of the ``B`` preceding windows of ``window`` samples, each separated from the
-  next (and the first from the test window) by ``gap`` skipped samples; ``S`` their sample covariance;
-* ``T^2 = m^T S^-1 m``. If the window means are independent ``N(0, Sigma)`` (H0), ``(B - 1) S`` is
-  Wishart(``Sigma``, ``B - 1``) independent of ``m``, and ``(nu - p + 1) / (p nu) T^2 ~ F(p, nu - p + 1)``
-  with ``nu = B - 1``: the p-value is exact whatever ``Sigma`` is.
+* ``b_1 .. b_B`` = reference window means: the older samples cut into consecutive blocks of
+  ``window + gap``, each averaged over its last ``window`` samples (the first ``gap`` are a guard), the
+  last ``B <= reference`` blocks kept; ``gap`` samples also separate the test window from the reference;
+* ``S`` = sample covariance of the ``b_j`` about their own mean (``nu = B - 1`` dof);
+* ``T^2 = m^T S^-1 m``. If the window means are independent ``N(0, Sigma)`` (H0), ``nu S`` is
+  Wishart(``Sigma``, ``nu``) independent of ``m``, and ``(nu - p + 1) / (p nu) T^2 ~ F(p, nu - p + 1)``:
+  the p-value is exact whatever ``Sigma`` is.
+
+Centring the reference on its own mean keeps the scale right when the co-state is biased from the start
+(a mismatch present from t = 0 is still tested against zero with a clean scale).
 
 Serial correlation. Consecutive co-states are correlated: the default GPF's co-state is close to a first
 difference of the measurement noise (lag-1 autocorrelation about -0.5), the bootstrap PF's is positively
-correlated. Both batch means share the same within-window correlation, so the scale ``S`` is the variance
-of a *window mean* of the correlated process (a differenced noise telescopes inside a window; the batch
-means see exactly that); the ``gap`` makes consecutive window means independent for any process whose
-memory is shorter than ``gap`` samples, and nearly so when the memory is short against ``window``.
-The test is therefore calibrated for short-memory stationary co-states, with no model of the correlation.
+correlated. The test and reference means average the same number of consecutive samples, so ``S`` is the
+variance of a *window mean* of the correlated process (a differenced noise telescopes inside a window;
+the reference means see exactly that), and the ``gap`` makes the window means independent for any process
+whose memory is shorter than ``gap`` samples, nearly so when the memory is short against ``window``. No
+model of the correlation is needed. The limit: a correlation time comparable with ``window`` (an AR(1)
+with ``phi = 0.9``, ``(1 + phi) / (1 - phi) = 19`` samples, against ``window = 10``) makes the window
+means correlated and the false-alarm rate too high (2.7e-3 for a set 1e-3; docs/integrity.md).
+
+Quarantine. The samples of a test window whose p-value is below ``quarantine_rate`` (default
+``false_alarm_rate / 100``) never enter the reference: a clear fault does not inflate its own yardstick,
+so a persistent fault stays ``FAULT``.
 
 Missing data. A sample whose measured components are not all finite is ignored and counted
 (:attr:`CostateMonitor.rejected`); a sample with no measured component is ignored and counted
-(:attr:`CostateMonitor.unmeasured`). Samples are buffered in arrival order (a skipped sample leaves no
-hole). The test uses the components measured in *every* buffered sample it uses (e.g. range and elevation
-in the partial-observability case); a component measured only intermittently is left out until it has
-been measured throughout the span. Until ``min_reference`` reference windows are available the monitor is
-not ready: level ``OK``, ``statistic`` NaN, ``p_value`` 1.
+(:attr:`CostateMonitor.unmeasured`). Samples are used in arrival order (a skipped sample leaves no hole).
+The test uses the components measured in *every* sample of the test window and of every reference window
+(e.g. range and elevation in the partial-observability case); a component measured only intermittently is
+left out until it has been measured throughout. Until ``min_reference`` reference windows exist the monitor
+is not ready: level ``OK``, ``statistic`` NaN, ``p_value`` 1, ``ready`` False.
 
 The level is instantaneous (no latching): ``FAULT`` when ``p_value < false_alarm_rate``, ``WARN`` when
 ``p_value < warn_false_alarm_rate``, else ``OK``. Under H0 the probability that a given (ready) step is
@@ -92,6 +103,44 @@ def t2_threshold(p: int, nu: int, alpha: float) -> float:
     return p * nu / (nu - p + 1) * float(stats.f.isf(alpha, p, nu - p + 1))
 
 
+@dataclass(frozen=True)
+class _Reference:
+    """Whitening of the reference window means: ``T^2 = |W (m / scale)|^2`` over the kept components."""
+
+    keep: np.ndarray      # (p0,) bool: components with non-zero reference variance
+    scale: np.ndarray     # (k,) their standard deviations
+    whiten: np.ndarray    # (p, k) rows eigvec^T / sqrt(eigval) of the correlation, numerically non-zero
+    p: int
+    nu: int
+
+
+def _reference(reference_means: np.ndarray) -> _Reference | None:
+    B = reference_means.shape[0]
+    nu = B - 1
+    if nu < 1:
+        return None
+    centred = reference_means - reference_means.mean(axis=0)
+    scale = np.sqrt(np.einsum("ij,ij->j", centred, centred) / nu)
+    keep = scale > 0.0
+    if not keep.any():
+        return None
+    z_ref = centred[:, keep] / scale[keep]
+    eigval, eigvec = np.linalg.eigh(z_ref.T @ z_ref / nu)
+    good = eigval > 1e-10 * eigval[-1]
+    p = int(good.sum())
+    if nu - p + 1 < 1:
+        return None
+    whiten = eigvec[:, good].T / np.sqrt(eigval[good])[:, None]
+    return _Reference(keep, scale[keep], whiten, p, nu)
+
+
+def _t2(test_mean: np.ndarray, ref: _Reference) -> tuple[float, float]:
+    u = ref.whiten @ (test_mean[ref.keep] / ref.scale)
+    t2 = float(u @ u)
+    f = (ref.nu - ref.p + 1) / (ref.p * ref.nu) * t2
+    return t2, float(special.fdtrc(ref.p, ref.nu - ref.p + 1, f))
+
+
 def hotelling_t2(test_mean: np.ndarray, reference_means: np.ndarray) -> tuple[float, float, int, int]:
     """One-sample Hotelling test of ``test_mean`` ``(p,)`` against zero, scale from ``reference_means``.
 
@@ -104,29 +153,11 @@ def hotelling_t2(test_mean: np.ndarray, reference_means: np.ndarray) -> tuple[fl
         ``(T^2, p_value, p, nu)``; ``(nan, 1.0, 0, nu)`` if nothing can be tested (``nu < p``).
     """
     reference_means = np.asarray(reference_means, dtype=float)
-    test_mean = np.asarray(test_mean, dtype=float)
-    B = reference_means.shape[0]
-    nu = B - 1
-    if nu < 1:
-        return math.nan, 1.0, 0, nu
-    centred = reference_means - reference_means.mean(axis=0)
-    scale = np.sqrt(np.einsum("ij,ij->j", centred, centred) / nu)
-    keep = scale > 0.0
-    if not keep.any():
-        return math.nan, 1.0, 0, nu
-    z_ref = centred[:, keep] / scale[keep]
-    z = test_mean[keep] / scale[keep]
-    corr = z_ref.T @ z_ref / nu
-    eigval, eigvec = np.linalg.eigh(corr)
-    good = eigval > 1e-10 * eigval[-1]
-    p = int(good.sum())
-    if nu - p + 1 < 1:
-        return math.nan, 1.0, 0, nu
-    proj = eigvec[:, good].T @ z
-    t2 = float(np.sum(proj * proj / eigval[good]))
-    f = (nu - p + 1) / (p * nu) * t2
-    p_value = float(special.fdtrc(p, nu - p + 1, f))
-    return t2, p_value, p, nu
+    ref = _reference(reference_means)
+    if ref is None:
+        return math.nan, 1.0, 0, reference_means.shape[0] - 1
+    t2, p_value = _t2(np.asarray(test_mean, dtype=float), ref)
+    return t2, p_value, ref.p, ref.nu
 
 
 class CostateMonitor:
@@ -141,14 +172,25 @@ class CostateMonitor:
         gap: samples skipped between consecutive windows (decorrelation guard).
         false_alarm_rate: per-step probability of ``FAULT`` under H0.
         warn_false_alarm_rate: per-step probability of ``WARN`` or worse under H0 (>= false_alarm_rate).
+        quarantine_rate: p-value below which the samples of the test window and its guard are kept out
+            of the reference (default ``false_alarm_rate / 100``; 0 disables the quarantine).
 
-    The buffer holds ``window + reference * (window + gap)`` samples; the monitor is ready after
-    ``window + min_reference * (window + gap)`` accepted samples (defaults: 250 and 82, i.e. 500 s and
-    164 s at the lunar scenario's 2 s step).
+    The newest ``window + gap`` samples are the test window (the last ``window``) and the guard before
+    it. Older samples go to the reference, in consecutive blocks of ``window + gap`` whose last
+    ``window`` samples are averaged (the reference window means; the reference keeps the last
+    ``reference`` of them). A sample that was among the newest ``window + gap`` at a test with
+    ``p_value < quarantine_rate`` is *quarantined* (never enters the reference), so a clear fault does
+    not inflate the scale it is measured against: a persistent fault stays ``FAULT``, and a transient one
+    does not blind the monitor afterwards. The quarantine threshold is far below the FAULT one on
+    purpose: quarantining every FAULT would keep the most extreme H0 windows out of the reference,
+    shrink its spread and double the false-alarm rate at ``1e-3`` (measured). The monitor is ready after
+    ``(min_reference + 1) * (window + gap)`` accepted samples (defaults: 84, i.e. 168 s at the lunar
+    scenario's 2 s step) and remembers at most ``(reference + 2) * (window + gap)`` (264, 528 s).
     """
 
     def __init__(self, window: int = 10, reference: int = 20, min_reference: int = 6, gap: int = 2,
-                 false_alarm_rate: float = 1e-3, warn_false_alarm_rate: float = 1e-2):
+                 false_alarm_rate: float = 1e-3, warn_false_alarm_rate: float = 1e-2,
+                 quarantine_rate: float | None = None):
         window, reference, min_reference, gap = int(window), int(reference), int(min_reference), int(gap)
         if window < 1 or gap < 0:
             raise ValueError("window must be >= 1 and gap >= 0")
@@ -162,17 +204,30 @@ class CostateMonitor:
         self.gap = gap
         self.false_alarm_rate = float(false_alarm_rate)
         self.warn_false_alarm_rate = float(warn_false_alarm_rate)
-        self.capacity = window + reference * (window + gap)
+        self.quarantine_rate = (self.false_alarm_rate / 100.0 if quarantine_rate is None
+                                else float(quarantine_rate))
+        if not 0.0 <= self.quarantine_rate <= self.false_alarm_rate:
+            raise ValueError("need 0 <= quarantine_rate <= false_alarm_rate")
+        self.stride = window + gap
         self.reset()
 
     def reset(self) -> None:
         """Forget every sample and counter (e.g. after a filter re-initialisation)."""
-        self._values: np.ndarray | None = None  # (2 * capacity, m): each sample written twice
-        self._measured: np.ndarray | None = None
-        self._count = 0      # samples accepted since reset
-        self._head = 0       # next write position in [0, capacity)
-        self.rejected = 0    # samples ignored: a measured component not finite
-        self.unmeasured = 0  # samples ignored: nothing measured
+        self._dim: int | None = None
+        self._recent: np.ndarray | None = None       # (stride, m) newest samples, oldest first
+        self._recent_mask: np.ndarray | None = None
+        self._tainted = np.zeros(self.stride, dtype=bool)
+        self._n_recent = 0
+        self._block_sum: np.ndarray | None = None    # block being filled from the admitted samples
+        self._block_mask: np.ndarray | None = None
+        self._block_count = 0
+        self._means: list[np.ndarray] = []           # completed reference window means, oldest first
+        self._masks: list[np.ndarray] = []
+        self._cache: tuple | None = None             # (components, _Reference) of the current blocks
+        self._count = 0
+        self.rejected = 0     # samples ignored: a measured component not finite
+        self.unmeasured = 0   # samples ignored: nothing measured
+        self.quarantined = 0  # samples kept out of the reference (p_value < quarantine_rate)
         self._status = _NOT_READY
 
     # --- read-only state -------------------------------------------------------------------------------
@@ -196,6 +251,11 @@ class CostateMonitor:
         """Whether the last update made a test."""
         return self._status.ready
 
+    @property
+    def reference_means(self) -> np.ndarray:
+        """The reference window means ``(B, m)`` now in use, oldest first (0 for unmeasured)."""
+        return np.array(self._means).reshape(len(self._means), -1)
+
     # --- the test --------------------------------------------------------------------------------------
     def update(self, costate_mean, measured=None) -> IntegrityStatus:
         """Add one co-state sample and test.
@@ -207,7 +267,8 @@ class CostateMonitor:
 
         Returns:
             The new :class:`IntegrityStatus` (also :attr:`status`). Never raises on NaN/inf: the sample
-            is ignored and counted, and the previous status is returned.
+            is ignored and counted, and the previous status is returned. Raises ValueError only on a
+            shape error (``measured`` not of the co-state's shape, or the dimension changing).
         """
         x = np.array(costate_mean, dtype=float).reshape(-1)
         if measured is None:
@@ -216,54 +277,79 @@ class CostateMonitor:
             mask = np.array(measured, dtype=bool).reshape(-1)
             if mask.shape != x.shape:
                 raise ValueError(f"measured must have shape {x.shape}, got {mask.shape}")
+        if self._dim is None:
+            self._allocate(x.size)
+        elif x.size != self._dim:
+            raise ValueError(f"co-state dimension changed from {self._dim} to {x.size}")
         if not mask.any():
             self.unmeasured += 1
             return self._status
         if not np.all(np.isfinite(x[mask])):
             self.rejected += 1
             return self._status
-        if self._values is None or self._values.shape[1] != x.size:
-            if self._values is not None:
-                raise ValueError(f"co-state dimension changed from {self._values.shape[1]} to {x.size}")
-            self._values = np.zeros((2 * self.capacity, x.size))
-            self._measured = np.zeros((2 * self.capacity, x.size), dtype=bool)
         x = np.where(mask, x, 0.0)
-        for pos in (self._head, self._head + self.capacity):
-            self._values[pos] = x
-            self._measured[pos] = mask
-        self._head = (self._head + 1) % self.capacity
+        if self._n_recent == self.stride:  # the oldest recent sample leaves: to the reference or out
+            if self._tainted[0]:
+                self.quarantined += 1
+            else:
+                self._admit(self._recent[0], self._recent_mask[0])
+            self._recent[:-1] = self._recent[1:]
+            self._recent_mask[:-1] = self._recent_mask[1:]
+            self._tainted[:-1] = self._tainted[1:]
+            self._n_recent -= 1
+        self._recent[self._n_recent] = x
+        self._recent_mask[self._n_recent] = mask
+        self._tainted[self._n_recent] = False
+        self._n_recent += 1
         self._count += 1
         self._status = self._test()
+        if self._status.p_value < self.quarantine_rate:
+            self._tainted[:] = True
         return self._status
 
+    def _allocate(self, m: int) -> None:
+        self._dim = m
+        self._recent = np.zeros((self.stride, m))
+        self._recent_mask = np.zeros((self.stride, m), dtype=bool)
+        self._block_sum = np.zeros(m)
+        self._block_mask = np.ones(m, dtype=bool)
+
+    def _admit(self, x: np.ndarray, mask: np.ndarray) -> None:
+        """Add one sample to the reference block being filled; close the block when full."""
+        if self._block_count >= self.gap:  # the first ``gap`` samples of a block are the guard
+            self._block_sum += x
+            self._block_mask &= mask
+        self._block_count += 1
+        if self._block_count == self.stride:
+            self._means.append(self._block_sum / self.window)
+            self._masks.append(self._block_mask)
+            if len(self._means) > self.reference:
+                del self._means[0], self._masks[0]
+            self._block_sum = np.zeros(self._dim)
+            self._block_mask = np.ones(self._dim, dtype=bool)
+            self._block_count = 0
+            self._cache = None
+
     def _test(self) -> IntegrityStatus:
-        n = min(self._count, self.capacity)
-        stride = self.window + self.gap
-        n_ref = min(self.reference, (n - self.window) // stride)
-        if n_ref < self.min_reference:
+        if self._n_recent < self.stride or len(self._means) < self.min_reference:
             return _NOT_READY
-        used = self.window + n_ref * stride
-        end = self._head + self.capacity  # one past the newest sample, in the doubled buffer
-        values = self._values[end - used:end]
-        measured = self._measured[end - used:end]
-        # windows, newest last: reference windows at offsets 0, stride, ..., then the test window
-        idx = np.arange(n_ref + 1)[:, None] * stride + np.arange(self.window)[None, :]
-        windows = values[idx]                          # (n_ref + 1, window, m)
-        components = np.flatnonzero(measured[idx].all(axis=(0, 1)))
-        if components.size == 0:
+        measured = self._recent_mask.all(axis=0)
+        if self._cache is None or not np.array_equal(self._cache[0], measured):
+            components = np.flatnonzero(measured & np.logical_and.reduce(self._masks))
+            ref = _reference(np.array(self._means)[:, components]) if components.size else None
+            self._cache = (measured, components, ref)
+        _, components, ref = self._cache
+        if ref is None:
             return _NOT_READY
-        means = windows[:, :, components].mean(axis=1)  # (n_ref + 1, p)
-        t2, p_value, p, nu = hotelling_t2(means[-1], means[:-1])
-        if p == 0:
-            return _NOT_READY
+        t2, p_value = _t2(self._recent[self.gap:, components].mean(axis=0), ref)
         if p_value < self.false_alarm_rate:
             level = "FAULT"
         elif p_value < self.warn_false_alarm_rate:
             level = "WARN"
         else:
             level = "OK"
-        return IntegrityStatus(level, t2, t2_threshold(p, nu, self.false_alarm_rate), p_value, True,
-                               tuple(int(c) for c in components))
+        return IntegrityStatus(level, t2, t2_threshold(ref.p, ref.nu, self.false_alarm_rate), p_value, True,
+                               tuple(components[ref.keep].tolist()))
 
 
 __all__ = ["CostateMonitor", "IntegrityStatus", "hotelling_t2", "t2_threshold", "LEVELS"]
