@@ -224,7 +224,8 @@ def test_degenerate_reference_does_not_raise():
     for _ in range(300):
         status = monitor.update([0.0, 1.0, 2.0], np.ones(3, bool))  # constant: zero reference variance
     assert status.level == "OK" and not status.ready
-    t2, p, dim, _ = hotelling_t2(np.array([1.0, 1.0]), np.array([[1.0, 1.0], [2.0, 2.0], [3.0, 3.0], [0.0, 0.0]]))
+    collinear = np.array([[1.0, 1.0], [2.0, 2.0], [3.0, 3.0], [0.0, 0.0]])
+    t2, p, dim, _ = hotelling_t2(np.array([1.0, 1.0]), collinear)
     assert dim == 1 and np.isfinite(t2) and 0.0 <= p <= 1.0  # collinear components: rank 1
 
 
