@@ -82,11 +82,16 @@ def position_covariance(pose_covariance) -> np.ndarray:
 
 
 # --- outputs -----------------------------------------------------------------------------------------
-def _cov6(block: np.ndarray) -> list[float]:
+_ROTATION_BLOCK = np.eye(3) * UNKNOWN_ROTATION_VARIANCE
+
+
+def _cov6(block: np.ndarray) -> np.ndarray:
+    """Row-major 6x6 covariance ``(36,)`` float64 (a numpy array: rosidl's fast path, no per-element
+    validation) with ``block`` as the linear part and the unknown-rotation diagonal."""
     out = np.zeros((6, 6))
     out[:3, :3] = block
-    out[3:, 3:] = np.eye(3) * UNKNOWN_ROTATION_VARIANCE
-    return out.reshape(-1).tolist()
+    out[3:, 3:] = _ROTATION_BLOCK
+    return out.reshape(36)
 
 
 def odometry_msg(mean: np.ndarray, cov: np.ndarray, stamp_ns: int, world_frame: str, base_frame: str,
