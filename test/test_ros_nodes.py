@@ -380,3 +380,56 @@ def test_same_seed_same_messages_on_the_wire(ros):
         ros.nodes.remove(sim)
     assert len(runs[0][0]) == 10 and len(runs[0][1]) == 201 and len(runs[0][2]) == 201
     assert runs[0] == runs[1]
+
+
+class _TurnsNaN:
+    """A filter proxy whose mean becomes NaN after its second update."""
+
+    def __init__(self, inner):
+        self.inner, self.updates = inner, 0
+
+    def __getattr__(self, name):
+        return getattr(self.inner, name)
+
+    def update(self, y):
+        self.updates += 1
+        self.inner.update(y)
+
+    @property
+    def mean(self):
+        return self.inner.mean * (np.nan if self.updates >= 2 else 1.0)
+
+    @property
+    def covariance(self):
+        return self.inner.covariance
+
+
+def test_non_finite_filter_output_is_recovered_and_reported_as_error(ros):
+    scenario = generate(ScenarioConfig(duration=60.0), 12)
+    base = ros.node.get_clock().now().nanoseconds - 100 * S
+    stamp = [base + int(round(t * S)) for t in scenario.times]
+    odom = ros.record(Odometry, "odometry/filtered")
+    diagnostics = ros.record(DiagnosticArray, "/diagnostics")
+    est = ros.add(EstimatorNode(context=ros.context, parameter_overrides=[
+        Parameter("n_particles", value=100), Parameter("publish_rate", value=0.0),
+        Parameter("initial_state", value=[float(v) for v in scenario.prior_mean]),
+        Parameter("initial_stamp", value=base * 1e-9), Parameter("diagnostics_period", value=0.25)]))
+    est.engine.filter = _TurnsNaN(est.engine.filter)
+    rae = ros.node.create_publisher(Vector3Stamped, "measurements/rae", 100)
+    assert ros.spin_until(lambda: rae.get_subscription_count() > 0, 30.0)
+    for k in range(4):
+        rae.publish(_rae(stamp[k], scenario.measurements[k]))
+        ros.spin_for(0.1)
+
+    def error_reported():
+        status = _latest_status(diagnostics)
+        return status is not None and status.level == b"\x02"
+
+    assert ros.spin_until(error_reported, 20.0)
+    status = _latest_status(diagnostics)
+    assert "filter re-initialised" in status.message
+    values = parse_values(status)
+    assert values["reinitializations"] == "1" and values["rejected filter_error"] == "1"
+    assert ros.spin_until(lambda: {stamp[2], stamp[3]} & {conv.stamp_to_ns(m.header.stamp) for m in odom}, 20.0)
+    assert all(_finite_odometry(m) for m in odom)
+    _assert_diagnostics_finite(diagnostics)
