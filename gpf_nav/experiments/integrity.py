@@ -88,6 +88,7 @@ class Settings:
     warn_false_alarm_rate: float = 1e-2
     variants: tuple[str, ...] = VARIANTS
     alphas: tuple[float, ...] = (1e-3, 1e-2, 5e-2, 0.1)
+    run_alphas: tuple[float, ...] = (1e-6, 1e-5, 1e-4, 1e-3)
 
     def faults(self) -> list[tuple[str, str, float]]:
         """``(name, kind, magnitude)`` of the mid-run faults."""
@@ -281,6 +282,7 @@ def summarise(mon: dict, error: np.ndarray, times: np.ndarray, fault_step: int |
     }
     first = np.flatnonzero(fault)
     out["first_fault_time"] = float(times[first[0]]) if first.size else math.nan
+    out["min_p"] = float(p.min()) if p.size else 1.0
     if fault_step is not None:
         onset = times[fault_step - 1]  # = fault_time; measurement fault_step is the first faulty one
         pre = slice(0, fault_step)
@@ -293,6 +295,8 @@ def summarise(mon: dict, error: np.ndarray, times: np.ndarray, fault_step: int |
         out["faulted_at_onset"] = bool(fault[fault_step - 1])
         out["post_fault_steps"] = int(fault[post].sum())
         out["post_steps"] = int(ready[post].sum())
+        p_post = mon["p_value"][post][ready[post]]
+        out["min_p_post"] = float(p_post.min()) if p_post.size else 1.0
         out["pre_rmse"] = float(np.sqrt(np.nanmean(error[pre] ** 2)))
         out["post_rmse"] = float(np.sqrt(np.nanmean(error[post] ** 2)))
     return out
@@ -342,10 +346,14 @@ def aggregate(settings: Settings, runs: list[dict]) -> dict:
         }}
         mis = rows["mismatch"]
         times = [r["first_fault_time"] for r in mis]
+        entry["nominal"]["runs_min_p_below"] = [int(sum(r["min_p"] < a for r in nom))
+                                                for a in settings.run_alphas]
+        entry["nominal"]["median_first_fault"] = _pct([r["first_fault_time"] for r in nom], 50)
         entry["mismatch"] = {
             "runs": len(mis), "missed": int(sum(not np.isfinite(t) for t in times)),
             "median_first_fault": _pct(times, 50), "p90_first_fault": _pct(times, 90),
             "ready_time": _pct([r["ready_time"] for r in mis], 50),
+            "runs_min_p_below": [int(sum(r["min_p"] < a for r in mis)) for a in settings.run_alphas],
             "fault_rate": sum(r["fault_steps"] for r in mis) / max(sum(r["ready_steps"] for r in mis), 1),
             "median_position_rmse": float(np.median([r["position_rmse"] for r in mis])),
         }
@@ -363,6 +371,9 @@ def aggregate(settings: Settings, runs: list[dict]) -> dict:
                 "post_fault_rate": sum(r["post_fault_steps"] for r in rs) / max(sum(r["post_steps"]
                                                                                 for r in rs), 1),
                 "median_post_rmse": float(np.median([r["post_rmse"] for r in rs])),
+                "run_alphas": list(settings.run_alphas),
+                "runs_min_p_post_below": [int(sum(r["min_p_post"] < a for r in rs))
+                                          for a in settings.run_alphas],
             }
         out[variant] = entry
     return out
@@ -407,14 +418,16 @@ def table(settings: Settings, summary: dict) -> str:
     for v in settings.variants:
         rates = summary[v]["nominal"]["rate_p_below"]
         lines.append(f"{v:8s} " + " ".join(f"{r:9.4f}" for r in rates))
-    lines += ["", f"Mismatch epsilon = {settings.epsilon} from t = 0: time to the first FAULT (s)",
+    lines += ["", f"Mismatch epsilon = {settings.epsilon} from t = 0: time to the first FAULT (s); control: "
+              "the same at epsilon = 0",
               f"{'variant':8s} {'ready at':>9s} {'median':>8s} {'90 %':>8s} {'missed':>8s} "
-              f"{'FAULT rate':>11s}"]
+              f"{'FAULT rate':>11s} {'control: median, runs w/o FAULT':>32s}"]
     for v in settings.variants:
-        m = summary[v]["mismatch"]
+        m, n = summary[v]["mismatch"], summary[v]["nominal"]
         lines.append(f"{v:8s} {_fmt(m['ready_time']):>9s} {_fmt(m['median_first_fault']):>8s} "
                      f"{_fmt(m['p90_first_fault']):>8s} {m['missed']:>4d} / {m['runs']:<2d} "
-                     f"{m['fault_rate']:11.3f}")
+                     f"{m['fault_rate']:11.3f} {_fmt(n['median_first_fault']):>21s}, "
+                     f"{n['runs'] - n['runs_with_fault']:>2d} / {n['runs']}")
     lines += ["", f"Sudden faults at t = {settings.fault_time:.0f} s: detection delay (s) = first FAULT at "
               "or after the fault minus the fault time",
               f"over the {settings.post_fault:.0f} s after it and the runs not already in FAULT at the fault "
@@ -429,6 +442,16 @@ def table(settings: Settings, summary: dict) -> str:
                          f"{_fmt(f['p90_delay_with_misses']):>8s} {f['missed']:>4d} / {f['clean_runs']:<2d} "
                          f"{f['faulted_at_onset']:>8d} / {f['runs']:<2d} "
                          f"{f['pre_fault_rate']:9.3f} / {f['post_fault_rate']:.3f}")
+    alphas = settings.run_alphas
+    lines += ["", "Runs (of all) with a p-value below alpha: epsilon = 0 (whole run), mismatch (whole run), "
+              f"and each fault over the {settings.post_fault:.0f} s after {settings.fault_time:.0f} s "
+              "('control': the fault-free run there)",
+              f"{'case':17s} {'variant':8s} " + " ".join(f"{'a=' + format(a, 'g'):>8s}" for a in alphas)]
+    for name in ["nominal", "mismatch"] + [name for name, _, _ in settings.faults()] + ["control"]:
+        for v in settings.variants:
+            f = summary[v][name]
+            counts = f["runs_min_p_below"] if "runs_min_p_below" in f else f["runs_min_p_post_below"]
+            lines.append(f"{name:17s} {v:8s} " + " ".join(f"{c:>3d} / {f['runs']:<2d}" for c in counts))
     return "\n".join(lines)
 
 
@@ -563,6 +586,42 @@ def _save(plt, fig, path: Path) -> Path:
     return path
 
 
+# --- synthetic calibration ------------------------------------------------------------------------------
+SYNTHETIC = ("iid", "differenced", "ar0.5", "ar0.8", "ar0.9")
+
+
+def synthetic_series(kind: str, steps: int, rng: np.random.Generator, m: int = 3) -> np.ndarray:
+    """H0 co-state series ``(steps, m)``: iid N(0, 1), a first difference of white noise (the default
+    GPF's co-state is close to it), or an AR(1) ``ar<phi>``; components scaled by 1, 1e3 and 1e6."""
+    e = rng.standard_normal((steps + 1, m))
+    if kind == "iid":
+        x = e[1:]
+    elif kind == "differenced":
+        x = e[1:] - e[:-1]
+    elif kind.startswith("ar"):
+        phi = float(kind[2:])
+        x = np.empty((steps, m))
+        x[0] = e[0] / math.sqrt(1.0 - phi * phi)
+        for k in range(1, steps):
+            x[k] = phi * x[k - 1] + e[k]
+    else:
+        raise ValueError(f"unknown series {kind!r}")
+    return x * np.logspace(0, 3 * (m - 1), m)
+
+
+def synthetic_calibration(settings: Settings, steps: int, seed: int) -> dict:
+    """Per-ready-step rate of ``p < alpha`` of one monitor run over each synthetic H0 series."""
+    out = {}
+    for i, kind in enumerate(SYNTHETIC):
+        x = synthetic_series(kind, steps, np.random.default_rng([seed, i]))
+        mon = monitor_series(settings, x, np.ones(x.shape, dtype=bool))
+        p = mon["p_value"][mon["ready"]]
+        out[kind] = {"ready_steps": int(p.size),
+                     "rate_p_below": [float(np.mean(p < a)) for a in settings.alphas],
+                     "quarantined_tests": int(np.sum(p < settings.false_alarm_rate / 100.0))}
+    return out
+
+
 # --- command line --------------------------------------------------------------------------------------
 def _jsonable(obj):
     if isinstance(obj, dict):
@@ -614,6 +673,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=Path("results/integrity"), help="JSON directory")
     parser.add_argument("--figures", type=Path, default=FIGURES, help="figure directory")
     parser.add_argument("--no-plots", action="store_true")
+    parser.add_argument("--synthetic", type=int, default=0, metavar="STEPS",
+                        help="instead: calibration of the monitor on synthetic H0 series of STEPS steps")
     args = parser.parse_args(argv)
     variants = tuple(v.strip() for v in args.variants.split(",") if v.strip())
     if not variants or any(v not in VARIANTS for v in variants):
@@ -628,6 +689,20 @@ def main(argv: list[str] | None = None) -> int:
                         false_alarm_rate=args.false_alarm_rate,
                         warn_false_alarm_rate=args.warn_false_alarm_rate, variants=variants)
     start = time.perf_counter()
+    if args.synthetic:
+        result = synthetic_calibration(settings, args.synthetic, settings.seed)
+        print(f"Monitor on synthetic H0 series, {args.synthetic} steps each: fraction of ready steps with "
+              "p below alpha")
+        print(f"{'series':12s} " + " ".join(f"{'a=' + format(a, 'g'):>9s}" for a in settings.alphas))
+        for kind, r in result.items():
+            print(f"{kind:12s} " + " ".join(f"{v:9.4f}" for v in r["rate_p_below"]))
+        args.out.mkdir(parents=True, exist_ok=True)
+        path = args.out / "integrity_synthetic.json"
+        path.write_text(json.dumps(_jsonable({"settings": settings.__dict__, "steps": args.synthetic,
+                                              "series": result, "command": "python -m "
+                                              "gpf_nav.experiments.integrity " + " ".join(argv)}), indent=1))
+        print(f"\nwall time {time.perf_counter() - start:.0f} s; wrote {path}")
+        return 0
     runs = []
     for run in range(settings.runs):
         runs.append(run_one(settings, run, keep_series=(run == 0)))
