@@ -1,6 +1,6 @@
 """Node-latency benchmark: measurement message published -> matching ``odometry/filtered`` received.
 
-    gpf-nav bench --node [--rates 10,50,200] [--particles 500,10000] [--seconds 5] [--json]
+    gpf-nav bench --node [--json] [-- --rates 10,50,200 --particles 500,10000 --seconds 5]
     python -m gpf_nav.ros.latency ...
 
 For each particle count the estimator runs as a separate process (``python -m
@@ -205,6 +205,10 @@ def format_table(results: list[dict]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Print the latency table (or JSON); ``gpf-nav bench --node -- <these options>`` lands here too."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["--"]:  # forwarded verbatim by gpf-nav bench --node -- ...
+        argv = argv[1:]
     args = _parser().parse_args(argv)
     results = run(args)
     if args.json:
