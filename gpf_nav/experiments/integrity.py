@@ -477,7 +477,7 @@ def draw_figures(settings: Settings, runs: list[dict], summary: dict, example: d
     variants = settings.variants
 
     # 1. false alarms at epsilon = 0: pooled rates vs the set rates, and per-run rate vs position RMSE
-    fig, axes = plt.subplots(1, 2, figsize=(13, 4.8))
+    fig, axes = plt.subplots(1, 3, figsize=(19, 4.8))
     ax = axes[0]
     x = np.arange(len(variants))
     floor = 1e-5
@@ -495,20 +495,24 @@ def draw_figures(settings: Settings, runs: list[dict], summary: dict, example: d
     ax.set_ylabel("alarm rate per ready step")
     ax.set_title(f"Alarm rate at epsilon = 0 ({settings.runs} runs x 1200 steps, N = {settings.particles})")
     ax.legend(fontsize=8)
-    ax = axes[1]
-    for v in variants:
-        nom = [r["variants"][v]["nominal"] for r in runs]
-        bias = [abs(n["innovation_mean"][0]) for n in nom]
-        fr = [max(n["fault_steps"] / max(n["ready_steps"], 1), floor) for n in nom]
-        ax.scatter(bias, fr, s=18, color=_COLOURS.get(v), label=v, alpha=0.8)
-    ax.axhline(settings.false_alarm_rate, color="k", ls="--", lw=1)
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_ylim(floor / 2, 1.5)
-    ax.set_xlabel("|time mean of the whitened range innovation|, 1200-2400 s (sigma)")
-    ax.set_ylabel(f"FAULT rate of the run (floored at {floor:g})")
-    ax.set_title("Per run at epsilon = 0: alarms vs the filter's prediction bias", fontsize=10)
-    ax.legend(fontsize=8)
+    for ax, what in zip(axes[1:], ("rmse", "bias")):
+        for v in variants:
+            nom = [r["variants"][v]["nominal"] for r in runs]
+            x = [n["position_rmse"] / 1e3 if what == "rmse" else abs(n["innovation_mean"][0]) for n in nom]
+            fr = [max(n["fault_steps"] / max(n["ready_steps"], 1), floor) for n in nom]
+            ax.scatter(x, fr, s=18, color=_COLOURS.get(v), label=v, alpha=0.8)
+        ax.axhline(settings.false_alarm_rate, color="k", ls="--", lw=1)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_ylim(floor / 2, 1.5)
+        ax.set_ylabel(f"FAULT rate of the run (floored at {floor:g})")
+        ax.legend(fontsize=8)
+        if what == "rmse":
+            ax.set_xlabel("position RMSE of the run (km)")
+            ax.set_title("Per run at epsilon = 0: alarms vs position error", fontsize=10)
+        else:
+            ax.set_xlabel("|time mean of the whitened range innovation|, 1200-2400 s (sigma)")
+            ax.set_title("Per run at epsilon = 0: alarms vs range prediction bias", fontsize=10)
     written.append(_save(plt, fig, directory / "integrity_false_alarms.png"))
 
     # 2. detection delays per fault and variant; runs already in FAULT at the fault time are not tests
@@ -639,6 +643,15 @@ def _jsonable(obj):
     return obj
 
 
+def _nan_for_none(obj):
+    """Inverse of :func:`_jsonable` for the non-finite floats (written as null)."""
+    if isinstance(obj, dict):
+        return {k: _nan_for_none(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_nan_for_none(v) for v in obj]
+    return math.nan if obj is None else obj
+
+
 def _csv(values) -> str:
     return ",".join(f"{v:g}" for v in values)
 
@@ -673,6 +686,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=Path("results/integrity"), help="JSON directory")
     parser.add_argument("--figures", type=Path, default=FIGURES, help="figure directory")
     parser.add_argument("--no-plots", action="store_true")
+    parser.add_argument("--replot", type=Path, metavar="JSON",
+                        help="instead: print the table and redraw the figures of a previous integrity.json")
     parser.add_argument("--synthetic", type=int, default=0, metavar="STEPS",
                         help="instead: calibration of the monitor on synthetic H0 series of STEPS steps")
     args = parser.parse_args(argv)
@@ -689,6 +704,22 @@ def main(argv: list[str] | None = None) -> int:
                         false_alarm_rate=args.false_alarm_rate,
                         warn_false_alarm_rate=args.warn_false_alarm_rate, variants=variants)
     start = time.perf_counter()
+    if args.replot:
+        report = _nan_for_none(json.loads(args.replot.read_text()))
+        settings = Settings(**{k: tuple(v) if isinstance(v, list) else v
+                               for k, v in report["settings"].items()})
+        runs = report["runs"]
+        for r in runs:
+            for v in r["variants"].values():
+                for s in v.values():
+                    for key in ("series",):
+                        if key in s:
+                            s[key] = {k: np.array(x, dtype=float) for k, x in s[key].items()}
+        times = ScenarioConfig().dt * np.arange(1, ScenarioConfig().steps + 1)
+        print(table(settings, report["summary"]))
+        written = draw_figures(settings, runs, report["summary"], runs[0], times, args.figures)
+        print("wrote " + ", ".join(str(p) for p in written))
+        return 0
     if args.synthetic:
         result = synthetic_calibration(settings, args.synthetic, settings.seed)
         print(f"Monitor on synthetic H0 series, {args.synthetic} steps each: fraction of ready steps with "
@@ -710,21 +741,22 @@ def main(argv: list[str] | None = None) -> int:
     summary = aggregate(settings, runs)
     wall = time.perf_counter() - start
     print(table(settings, summary))
-    example = runs[0]
     times = ScenarioConfig().dt * np.arange(1, ScenarioConfig().steps + 1)
     written = []
     if not args.no_plots:
-        written = draw_figures(settings, runs, summary, example, times, args.figures)
-    for r in runs:
+        written = draw_figures(settings, runs, summary, runs[0], times, args.figures)
+    for r in runs:  # keep the example run's monitor statistic and threshold (for --replot) only
         for v in r["variants"].values():
             for s in v.values():
-                s.pop("series", None)
+                series = s.pop("series", None)
+                if series is not None:
+                    s["series"] = {"statistic": series["statistic"], "threshold": series["threshold"]}
     report = {"settings": settings.__dict__, "variant_labels": VARIANT_LABELS, "summary": summary,
               "runs": runs, "wall_seconds": wall,
               "command": "python -m gpf_nav.experiments.integrity " + " ".join(argv)}
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "integrity.json"
-    path.write_text(json.dumps(_jsonable(report), indent=1))
+    path.write_text(json.dumps(_jsonable(report)))
     written.append(path)
     print(f"\nwall time {wall:.0f} s; wrote " + ", ".join(str(p) for p in written))
     return 0
