@@ -4,9 +4,14 @@
 and the thresholds; :func:`to_msg` turns that into ``diagnostic_msgs/DiagnosticArray``. Levels:
 
 * ERROR: the filter was re-initialised (non-finite output or an exception) within ``reinit_hold`` s;
+  or the co-state integrity monitor is at FAULT (held ``monitor_hold`` s);
 * WARN: not initialised yet; ESS/N below ``ess_warn_threshold``; mean co-state norm above
-  ``costate_warn_threshold``; or no measurement accepted for ``sensor_timeout`` s (node clock);
+  ``costate_warn_threshold``; no measurement accepted for ``sensor_timeout`` s (node clock); or the
+  integrity monitor at WARN (held ``monitor_hold`` s);
 * OK otherwise.
+
+The message names every cause (``filter re-initialised (...)``, ``integrity FAULT: ...``), so an ERROR
+from a re-initialisation and one from the monitor are told apart.
 """
 from __future__ import annotations
 
@@ -17,6 +22,8 @@ from gpf_nav.ros.validation import REASONS
 
 OK, WARN, ERROR = 0, 1, 2
 STATUS_NAME = "gpf_estimator: filter"
+COMPONENT_NAMES = ("range", "azimuth", "elevation")
+INTEGRITY_LEVEL = {"OK": OK, "WARN": WARN, "FAULT": ERROR}
 
 
 @dataclass
@@ -60,6 +67,10 @@ def filter_status(engine, now_ns: int | None, thresholds: Thresholds, filter_nam
     if silent_for > thresholds.sensor_timeout:
         level = max(level, WARN)
         problems.append(f"no measurement for {silent_for:.1f} s")
+    report = engine.integrity() if hasattr(engine, "integrity") else None
+    if report is not None and report.level != "OK":
+        level = max(level, INTEGRITY_LEVEL[report.level])
+        problems.append(_integrity_problem(report))
     message = "; ".join(problems) if problems else "tracking"
 
     measurements = ("rae", "range")
@@ -84,7 +95,58 @@ def filter_status(engine, now_ns: int | None, thresholds: Thresholds, filter_nam
         values.append((f"accepted {stream}", str(c.accepted[stream])))
     for reason in REASONS:
         values.append((f"rejected {reason}", str(c.rejected[reason])))
+    if report is not None:
+        values.extend(integrity_values(report, filter_name))
     return level, message, values
+
+
+def _components(indices) -> str:
+    return ", ".join(COMPONENT_NAMES[i] if i < len(COMPONENT_NAMES) else str(i) for i in indices) or "none"
+
+
+def _integrity_problem(report) -> str:
+    """``integrity FAULT: co-state mean T^2 41.2 > 16.3 (p = 3.2e-07; range, elevation)``, with ``N s
+    ago`` when the alarm is held from an earlier update."""
+    s = report.alarm if report.alarm is not None else report.status
+    when = f" {report.alarm_age:.1f} s ago" if report.alarm is not None else ""
+    if report.level == "FAULT":
+        test = f"co-state mean T^2 {s.statistic:.4g} > {s.threshold:.4g}"
+    else:
+        test = f"co-state mean T^2 {s.statistic:.4g}"
+    return f"integrity {report.level}{when}: {test} (p = {s.p_value:.2g}; {_components(s.components)})"
+
+
+def integrity_values(report, filter_name: str) -> list[tuple[str, str]]:
+    """The ``integrity ...`` key/values of an :class:`gpf_nav.ros.engine.IntegrityReport` (no NaN:
+    figures that do not exist read ``n/a``)."""
+    if report.state == "disabled":
+        head = [("integrity level", "disabled"), ("integrity monitor", "disabled (monitor_enabled: false)")]
+    elif report.state == "unavailable":
+        head = [("integrity level", "unavailable"),
+                ("integrity monitor", f"unavailable: {filter_name} has no co-state")]
+    else:
+        head = [("integrity level", report.level), ("integrity monitor", "active")]
+    values = head
+    s = report.status
+    ready = s is not None and s.ready
+    values += [
+        ("integrity ready", str(ready).lower()),
+        ("integrity last level", s.level if s is not None else "n/a"),
+        ("integrity statistic", _fmt(s.statistic) if ready and math.isfinite(s.statistic) else "n/a"),
+        ("integrity threshold", _fmt(s.threshold) if ready and math.isfinite(s.threshold) else "n/a"),
+        ("integrity p-value", _fmt(s.p_value) if ready and math.isfinite(s.p_value) else "n/a"),
+        ("integrity components", _components(s.components) if ready else "n/a"),
+        ("integrity samples", str(report.samples)),
+        ("integrity fault updates", str(report.fault_updates)),
+        ("integrity warn updates", str(report.warn_updates)),
+        ("integrity rejected samples", str(report.rejected)),
+        ("integrity skipped updates", str(report.skipped)),
+        ("integrity quarantined samples", str(report.quarantined)),
+        ("integrity resets", str(report.resets)),
+    ]
+    if report.error:
+        values.append(("integrity error", report.error))
+    return values
 
 
 def to_msg(level: int, message: str, values, stamp, hardware_id: str = "gpf_nav"):

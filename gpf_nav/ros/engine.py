@@ -29,10 +29,12 @@ from typing import Callable
 
 import numpy as np
 
+from gpf_nav.integrity import CostateMonitor, IntegrityStatus
 from gpf_nav.ros.initialization import batch_initial_state
 from gpf_nav.ros.validation import Counters, RateLimiter, check_timing
 
 NS = 1_000_000_000
+LEVEL_RANK = {"OK": 0, "WARN": 1, "FAULT": 2}
 
 
 @dataclass
@@ -49,6 +51,42 @@ class EngineConfig:
     max_extrapolation: float = 300.0        # s, predictions are not published further than this
     reinit_inflation: float = 4.0           # covariance factor when re-initialising after a failure
     reinit_hold: float = 10.0               # s (steady clock) the ERROR level is held after it
+    monitor: dict | None = field(default_factory=dict)  # CostateMonitor keyword arguments; None: disabled
+    monitor_hold: float = 5.0               # s (steady clock) a monitor WARN/FAULT stays reported
+
+
+@dataclass(frozen=True)
+class IntegrityReport:
+    """What :meth:`EstimatorEngine.integrity` says about the co-state monitor.
+
+    Attributes:
+        state: ``"active"``, ``"disabled"`` (``monitor_enabled: false``) or ``"unavailable"`` (the
+            filter has no co-state: EKF, UKF, EnKF, SPF without ``compute_costate``).
+        level: the level reported: worst of the last update's and of the held alarms (``"OK"``,
+            ``"WARN"``, ``"FAULT"``); ``"OK"`` unless active.
+        status: the monitor's last :class:`IntegrityStatus` (None unless active).
+        alarm: the status of the alarm behind ``level`` when it is held (None when ``level`` is the
+            last update's own), and ``alarm_age`` its age [s, steady clock].
+        samples, rejected, skipped, quarantined: monitor samples since its last reset; samples it
+            ignored (non-finite); updates not fed (``dt = 0``); samples kept out of its reference.
+        fault_updates, warn_updates: updates at FAULT / at WARN since start-up (cumulative).
+        resets: monitor resets since start-up.
+        error: the last exception the monitor raised ("" if none; the monitor is then reset).
+    """
+
+    state: str
+    level: str = "OK"
+    status: IntegrityStatus | None = None
+    alarm: IntegrityStatus | None = None
+    alarm_age: float = 0.0
+    samples: int = 0
+    rejected: int = 0
+    skipped: int = 0
+    quarantined: int = 0
+    fault_updates: int = 0
+    warn_updates: int = 0
+    resets: int = 0
+    error: str = ""
 
 
 class EstimatorEngine:
@@ -72,6 +110,11 @@ class EstimatorEngine:
         self.last_reinit_reason = ""
         self._last_reinit_time = -np.inf
         self._rate = RateLimiter(config.max_measurement_rate)
+        self.monitor = CostateMonitor(**config.monitor) if config.monitor is not None else None
+        self.integrity_fault_updates = 0      # cumulative, like the counters
+        self.integrity_warn_updates = 0
+        self.integrity_resets = 0
+        self.integrity_error = ""
         self.reset()
 
     # --- state -----------------------------------------------------------------------------------------
@@ -93,6 +136,8 @@ class EstimatorEngine:
         self._shadow_version = -1
         self._shadow_ns = None
         self.init_source = ""
+        self._last_dt = 0.0
+        self._reset_monitor()
         cfg = self.config
         if cfg.initial_state is not None and cfg.initial_stamp >= 0.0:
             self._initialize(cfg.initial_state, np.diag(cfg.initial_std ** 2),
@@ -115,6 +160,7 @@ class EstimatorEngine:
         self.t_ns = int(t_ns)
         self.init_source = source
         self._init_buffer = []
+        self._reset_monitor()
         self._store(t_ns)
 
     def _store(self, t_ns: int) -> bool:
@@ -166,18 +212,23 @@ class EstimatorEngine:
             self._recover(stamp_ns, "non-finite mean or covariance after the update")
             self.counters.reject(stream, "filter_error")
             return False, "filter_error"
-        self._check_core_recovery()
+        if not self._check_core_recovery():
+            self._feed_monitor(y)
         self.last_update_ns = stamp_ns
         self.counters.accept(stream)
         return True, ""
 
-    def _check_core_recovery(self) -> None:
+    def _check_core_recovery(self) -> bool:
+        """Count a re-initialisation the core filter did by itself (and reset the monitor); True if so."""
         recoveries = getattr(self.filter, "recoveries", 0)
-        if recoveries > self._core_recoveries:
+        recovered = recoveries > self._core_recoveries
+        if recovered:
             self.reinit_count += recoveries - self._core_recoveries
             self.last_reinit_reason = f"core filter recovery: {getattr(self.filter, 'last_recovery_reason', '')}"
             self._last_reinit_time = self.monotonic()
+            self._reset_monitor()
         self._core_recoveries = recoveries
+        return recovered
 
     def _buffer(self, stamp_ns: int, y: np.ndarray, stream: str) -> tuple[bool, str]:
         self._init_buffer.append((stamp_ns, y))
@@ -268,6 +319,7 @@ class EstimatorEngine:
 
     def _predict_to(self, stamp_ns: int) -> None:
         dt = (stamp_ns - self.t_ns) * 1e-9
+        self._last_dt = dt
         if dt > 0.0:
             self.filter.predict(dt, self._input_at(stamp_ns))
         self.t_ns = stamp_ns
@@ -322,6 +374,58 @@ class EstimatorEngine:
             good = self._good
             self.reset()
             self._good = good
+
+    # --- integrity -------------------------------------------------------------------------------------
+    def _reset_monitor(self) -> None:
+        if self.monitor is None:
+            return
+        if self.monitor.samples or getattr(self, "_skipped", 0):
+            self.integrity_resets += 1
+        self.monitor.reset()
+        self._skipped = 0
+        self._alarms: dict[str, tuple[float, IntegrityStatus]] = {}
+
+    def _feed_monitor(self, y: np.ndarray) -> None:
+        """Give the monitor the co-state of the update just made (never raises)."""
+        if self.monitor is None or not self.has_costate:
+            return
+        if self._last_dt <= 0.0:
+            self._skipped += 1
+            return
+        try:
+            status = self.monitor.update(np.asarray(self.filter.costate_mean, dtype=float), np.isfinite(y))
+        except Exception as err:  # noqa: BLE001 - e.g. a co-state of another shape: start again
+            self.integrity_error = f"{type(err).__name__}: {err}"
+            self._reset_monitor()
+            return
+        if status.level == "FAULT":
+            self.integrity_fault_updates += 1
+        elif status.level == "WARN":
+            self.integrity_warn_updates += 1
+        if status.level != "OK":
+            self._alarms[status.level] = (self.monotonic(), status)
+
+    def integrity(self) -> IntegrityReport:
+        """The co-state monitor's state for the diagnostics (see :class:`IntegrityReport`)."""
+        common = dict(fault_updates=self.integrity_fault_updates, warn_updates=self.integrity_warn_updates,
+                      resets=self.integrity_resets, error=self.integrity_error)
+        if self.monitor is None:
+            return IntegrityReport("disabled", **common)
+        if not self.has_costate:
+            return IntegrityReport("unavailable", **common)
+        m = self.monitor
+        status = m.status
+        level, alarm, age = status.level, None, 0.0
+        now = self.monotonic()
+        for held in ("FAULT", "WARN"):
+            if held not in self._alarms or LEVEL_RANK[held] <= LEVEL_RANK[level]:
+                continue
+            t, s = self._alarms[held]
+            if now - t < self.config.monitor_hold:
+                level, alarm, age = held, s, now - t
+                break
+        return IntegrityReport("active", level, status, alarm, age, m.samples, m.rejected, self._skipped,
+                               m.quarantined, **common)
 
     # --- summaries -------------------------------------------------------------------------------------
     def measurement_age(self, now_ns: int | None) -> float | None:

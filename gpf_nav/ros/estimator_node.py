@@ -68,7 +68,44 @@ def check_estimator_parameters(p: dict) -> list[str]:
         errors.append(f"parameter 'initial_stamp' = {p['initial_stamp']!r} must be finite")
     if not p["world_frame"]:
         errors.append("parameter 'world_frame' must not be empty")
+    errors.extend(check_monitor_parameters(p))
     return errors
+
+
+def check_monitor_parameters(p: dict) -> list[str]:
+    """Errors in the ``monitor_*`` parameters (checked even when the monitor is disabled)."""
+    errors = []
+    if p["monitor_window"] < 1:
+        errors.append(f"parameter 'monitor_window' = {p['monitor_window']} must be >= 1")
+    if p["monitor_gap"] < 0:
+        errors.append(f"parameter 'monitor_gap' = {p['monitor_gap']} must be >= 0")
+    if not 2 <= p["monitor_min_reference"] <= p["monitor_reference"]:
+        errors.append(f"parameters 'monitor_min_reference' = {p['monitor_min_reference']} and 'monitor_reference' "
+                      f"= {p['monitor_reference']} must satisfy 2 <= monitor_min_reference <= monitor_reference")
+    alpha, warn = p["monitor_false_alarm_rate"], p["monitor_warn_false_alarm_rate"]
+    if not (math.isfinite(alpha) and 0.0 < alpha < 1.0):
+        errors.append(f"parameter 'monitor_false_alarm_rate' = {alpha!r} must lie in (0, 1)")
+    elif not (math.isfinite(warn) and alpha <= warn < 1.0):
+        errors.append(f"parameter 'monitor_warn_false_alarm_rate' = {warn!r} must lie in "
+                      f"[monitor_false_alarm_rate, 1) = [{alpha!r}, 1)")
+    quarantine = p["monitor_quarantine_rate"]
+    if not math.isfinite(quarantine) or (quarantine >= 0.0 and math.isfinite(alpha) and quarantine > alpha):
+        errors.append(f"parameter 'monitor_quarantine_rate' = {quarantine!r} must be negative (default) or "
+                      "lie in [0, monitor_false_alarm_rate]")
+    if not (math.isfinite(p["monitor_hold"]) and p["monitor_hold"] >= 0.0):
+        errors.append(f"parameter 'monitor_hold' = {p['monitor_hold']!r} must be >= 0")
+    return errors
+
+
+def monitor_options(p: dict) -> dict | None:
+    """``CostateMonitor`` keyword arguments from the node parameters (None when disabled)."""
+    if not p["monitor_enabled"]:
+        return None
+    return dict(window=p["monitor_window"], reference=p["monitor_reference"],
+                min_reference=p["monitor_min_reference"], gap=p["monitor_gap"],
+                false_alarm_rate=p["monitor_false_alarm_rate"],
+                warn_false_alarm_rate=p["monitor_warn_false_alarm_rate"],
+                quarantine_rate=None if p["monitor_quarantine_rate"] < 0 else p["monitor_quarantine_rate"])
 
 
 class EstimatorNode(Node):
@@ -101,7 +138,7 @@ class EstimatorNode(Node):
             initial_state=None if p["initial_state"] is None else np.array(p["initial_state"]),
             initial_std=np.array(p["initial_std"]), initial_stamp=p["initial_stamp"],
             max_measurement_rate=p["max_measurement_rate"], max_extrapolation=p["max_extrapolation"],
-            reinit_hold=p["reinit_hold"])
+            reinit_hold=p["reinit_hold"], monitor=monitor_options(p), monitor_hold=p["monitor_hold"])
         self.engine = EstimatorEngine(lambda: make_filter(p["filter"], self.model, **self._filter_options()),
                                       self.model, config)
         self.thresholds = diag.Thresholds(ess_warn=p["ess_warn_threshold"],
@@ -109,6 +146,7 @@ class EstimatorNode(Node):
                                           sensor_timeout=p["sensor_timeout"])
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._last_log: dict[str, float] = {}
+        self._integrity_level = "OK"
         self._last_published_ns: int | None = None
         self._last_now_ns = 0
         self._started = time.monotonic()
@@ -238,6 +276,22 @@ class EstimatorNode(Node):
         if reason == "buffered":
             return
         self._publish(stamp, self.engine.mean, self.engine.cov, update=True)
+        self._log_integrity(stamp)
+
+    def _log_integrity(self, stamp: int) -> None:
+        """A WARN log line when the monitor goes to FAULT (at most once per LOG_THROTTLE s)."""
+        monitor = self.engine.monitor
+        level = monitor.level if monitor is not None else "OK"
+        previous, self._integrity_level = self._integrity_level, level
+        if level != "FAULT" or previous == "FAULT":
+            return
+        now = time.monotonic()
+        if now - self._last_log.get("_integrity", -math.inf) >= LOG_THROTTLE:
+            self._last_log["_integrity"] = now
+            s = monitor.status
+            self.get_logger().warning(
+                f"integrity FAULT at {stamp * 1e-9:.3f} s: the mean co-state is biased (T^2 {s.statistic:.4g} > "
+                f"{s.threshold:.4g}, p = {s.p_value:.2g}): the model, the sensors or the filter disagree with the data")
 
     def _on_imu(self, msg: Imu) -> None:
         stamp = self._check_header("imu", msg.header, self.params["imu_frame"])

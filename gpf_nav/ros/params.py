@@ -74,6 +74,16 @@ ESTIMATOR = [
     Spec("costate_warn_threshold", 1e7, "WARN when the mean co-state norm exceeds this [whitened units/s].", live=True),
     Spec("sensor_timeout", 10.0, "WARN when no measurement was accepted for this long [s, node clock].", live=True),
     Spec("reinit_hold", 10.0, "Diagnostics stay ERROR this long after a re-initialisation [s, steady clock]."),
+    # integrity monitor (gpf_nav.integrity.CostateMonitor on the co-state; gpf, and spf with compute_costate)
+    Spec("monitor_enabled", True, "Run the co-state integrity monitor: WARN/ERROR in /diagnostics on a biased co-state (gpf, spf with compute_costate)."),
+    Spec("monitor_window", 10, "Monitor: updates per window mean (the test window and each reference window); >= 1."),
+    Spec("monitor_reference", 20, "Monitor: largest number of reference windows kept; >= monitor_min_reference."),
+    Spec("monitor_min_reference", 6, "Monitor: reference windows needed before testing (ready after (this + 1) * (window + gap) updates); >= 2."),
+    Spec("monitor_gap", 2, "Monitor: updates skipped between windows (decorrelation guard); >= 0."),
+    Spec("monitor_false_alarm_rate", 1e-3, "Monitor: per-update probability of FAULT (diagnostics ERROR) on a consistent filter, in (0, 1)."),
+    Spec("monitor_warn_false_alarm_rate", 1e-2, "Monitor: per-update probability of WARN or worse on a consistent filter, in [monitor_false_alarm_rate, 1)."),
+    Spec("monitor_quarantine_rate", -1.0, "Monitor: p-value below which a window is kept out of the reference; negative: monitor_false_alarm_rate / 100; 0: no quarantine."),
+    Spec("monitor_hold", 5.0, "A monitor WARN or FAULT stays in /diagnostics this long after the update that raised it [s, steady clock]."),
 ]
 
 SCENARIO_DESCRIPTIONS = {
