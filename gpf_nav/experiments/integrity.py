@@ -472,6 +472,8 @@ def draw_figures(settings: Settings, runs: list[dict], summary: dict, example: d
                  directory: Path) -> list[Path]:
     """``integrity_false_alarms.png``, ``integrity_delays.png`` and ``integrity_example.png``."""
     plt = _pyplot()
+    from matplotlib.ticker import NullFormatter
+
     directory.mkdir(parents=True, exist_ok=True)
     written = []
     variants = settings.variants
@@ -503,6 +505,7 @@ def draw_figures(settings: Settings, runs: list[dict], summary: dict, example: d
             ax.scatter(x, fr, s=18, color=_COLOURS.get(v), label=v, alpha=0.8)
         ax.axhline(settings.false_alarm_rate, color="k", ls="--", lw=1)
         ax.set_xscale("log")
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_yscale("log")
         ax.set_ylim(floor / 2, 1.5)
         ax.set_ylabel(f"FAULT rate of the run (floored at {floor:g})")
