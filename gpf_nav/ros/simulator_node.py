@@ -64,6 +64,8 @@ class SimulatorNode(Node):
 
     Attributes:
         finished: True once the trajectory has ended and ``loop`` is false.
+        trajectory_ns: trajectory time reached by the release loop in the current lap [ns] (0 before
+            the start).
         published: messages published per kind (``measurement``, ``imu``, ``truth``, ``clock``).
     """
 
@@ -84,6 +86,7 @@ class SimulatorNode(Node):
         self.period_ns = int(round(float(np.median(np.diff(self.scenario.times))) * NS)) \
             if len(self.scenario.times) > 1 else NS
         self.finished = False
+        self.trajectory_ns = 0
         self.published = {"measurement": 0, "imu": 0, "truth": 0, "clock": 0}
         self._index = 0
         self._lap_offset_ns = 0
@@ -123,6 +126,7 @@ class SimulatorNode(Node):
             self.published["clock"] += 1
         if target < 0:
             return
+        self.trajectory_ns = target
         while self._index < len(self.events) and self.events[self._index].t_ns <= target:
             self._emit(self.events[self._index])
             self._index += 1
