@@ -3,6 +3,7 @@
     gpf-nav bench        per-step cost of every filter (``gpf_nav.experiments.bench``)
     gpf-nav montecarlo   the paper's Monte Carlo table (``gpf_nav.experiments.montecarlo``)
     gpf-nav sweep        mismatch / noise sweeps (``gpf_nav.experiments.sweep``)
+    gpf-nav integrity    co-state monitor false alarms and detection delays (``gpf_nav.experiments.integrity``)
     gpf-nav demo         simulator + estimator over ROS 2, with a summary (``gpf_nav.ros.demo``)
 
 Sub-command modules are imported lazily, so e.g. ``bench`` needs neither ROS nor matplotlib.
@@ -17,6 +18,7 @@ COMMANDS = {
     "montecarlo": "gpf_nav.experiments.montecarlo",
     "sweep": "gpf_nav.experiments.sweep",
     "demo": "gpf_nav.ros.demo",
+    "integrity": "gpf_nav.experiments.integrity",
 }
 
 

@@ -80,6 +80,7 @@ class GeometricProjectionPF(ParticleFilter):
 
     def _propose(self, x_pred, y, rows, dt, inverse_factor, z):
         self._costate = np.zeros_like(self._costate)
+        self._costate_rows = np.zeros_like(rows)
         if self.reference == "increment":
             rows = rows & np.isfinite(self._previous_y)
         if dt == 0.0 or not rows.any() or (self.weighting == "corrected" and inverse_factor is None):
@@ -95,6 +96,7 @@ class GeometricProjectionPF(ParticleFilter):
         shift, a = project(H, r, self._whitener(rows), self.regularization, metric_factor,
                            self.model.measured_state_index)
         self._costate[:, rows] = a / dt
+        self._costate_rows = rows
         correction = gaussian_shift_correction(shift, inverse_factor, z) if self.weighting == "corrected" else 0.0
         return shift, correction
 

@@ -73,6 +73,7 @@ class ParticleFilter(Filter):
         self.resample_count = 0
         self.log_likelihood = 0.0
         self._costate = np.zeros((self.n_particles, model.measurement_dim))
+        self._costate_rows = np.zeros(model.measurement_dim, bool)
 
     # --- state ---------------------------------------------------------------------------------------
     def initialize(self, mean, cov):
@@ -116,9 +117,16 @@ class ParticleFilter(Filter):
 
     @property
     def costate(self) -> np.ndarray:
-        """Per-particle geometric co-state ``(N, m)`` of the last update, in whitened measurement
-        coordinates per second; zero for components not measured (or not computed)."""
+        """Per-particle geometric co-state ``(N, m)`` of the last update,
+        ``(H_w H_w^T + eps I)^-1 W r / dt`` with ``H_w = W H``: for the Euclidean metric its unit is a
+        squared state unit per second (m^2/s on the lunar model), for the process-noise metric 1/s.
+        Zero for components not measured (or not computed): see :attr:`costate_measured`."""
         return self._costate
+
+    @property
+    def costate_measured(self) -> np.ndarray:
+        """Components ``(m,)`` bool that the last co-state was computed for (the others are 0)."""
+        return self._costate_rows
 
     @property
     def costate_mean(self) -> np.ndarray:
@@ -308,9 +316,11 @@ class BootstrapPF(ParticleFilter):
         self.regularization = float(regularization)
 
     def _propose(self, x_pred, y, rows, dt, inverse_factor, z):
+        self._costate = np.zeros_like(self._costate)
+        self._costate_rows = np.zeros_like(rows)
         if self.compute_costate and dt > 0.0 and rows.any():
             H, r = self._innovation(x_pred.T, y, rows)
-            self._costate = np.zeros_like(self._costate)
+            self._costate_rows = rows
             a = project(H, r, self._whitener(rows), self.regularization,
                         columns=self.model.measured_state_index)[1]
             self._costate[:, rows] = a / dt
