@@ -97,6 +97,39 @@ def test_engine_feeds_holds_and_resets_the_monitor():
     assert ok and eng.integrity().samples == 0 and eng.integrity().resets == 2
 
 
+def test_engine_latches_with_a_negative_hold_and_masks_the_increment_reference():
+    s = generate(CLEAN, 0)
+    clock = _Clock()
+    eng = _engine(s, clock=clock, monitor_hold=-1.0)
+    for k in range(90):
+        eng.measurement(_stamp(s, k), s.measurements[k], None)
+    y = s.measurements[90].copy()
+    y[0] += BIAS
+    eng.measurement(_stamp(s, 90), y, None)
+    for k in range(91, 130):
+        eng.measurement(_stamp(s, k), s.measurements[k], None)
+    clock.t += 1e6
+    report = eng.integrity()
+    assert report.status.level == "OK" and report.level == "FAULT"  # latched
+    eng.reset()
+    assert eng.integrity().level == "OK"
+
+    # increment reference: a component not measured at the previous update has no co-state
+    inc = EstimatorEngine(lambda: make_filter("gpf", filter_model(CLEAN), n_particles=100, seed=1,
+                                              reference="increment"), filter_model(CLEAN), eng.config, clock)
+    masks = []
+    update = inc.monitor.update
+    inc.monitor.update = lambda lam, measured: masks.append(measured.tolist()) or update(lam, measured)
+    for k in range(6):
+        y = s.measurements[k].copy()
+        if k == 2:
+            y[1] = np.nan
+        inc.measurement(_stamp(s, k), y, None)
+    # update 0 has no previous measurement; the azimuth is missing at update 2, and before update 3
+    assert masks == [[False] * 3, [True] * 3, [True, False, True], [True, False, True], [True] * 3, [True] * 3]
+    assert inc.monitor.unmeasured == 1 and inc.monitor.samples == 5
+
+
 def test_engine_recovery_resets_the_monitor_and_ekf_has_none():
     s = generate(CLEAN, 1)
     eng = _engine(s)
@@ -249,7 +282,7 @@ def test_monitor_unavailable_or_disabled_over_dds(ros, params, level, monitor):
     ("monitor_false_alarm_rate", 0.0, "'monitor_false_alarm_rate' = 0.0 must lie in (0, 1)"),
     ("monitor_warn_false_alarm_rate", 1e-4, "'monitor_warn_false_alarm_rate' = 0.0001 must lie in"),
     ("monitor_quarantine_rate", 0.5, "'monitor_quarantine_rate' = 0.5"),
-    ("monitor_hold", -1.0, "'monitor_hold' = -1.0 must be >= 0"),
+    ("monitor_hold", float("inf"), "'monitor_hold' = inf must be finite"),
 ])
 def test_invalid_monitor_parameters_are_refused(ros, name, value, text):
     with pytest.raises(ParameterError) as err:

@@ -105,15 +105,16 @@ def _components(indices) -> str:
 
 
 def _integrity_problem(report) -> str:
-    """``integrity FAULT: co-state mean T^2 41.2 > 16.3 (p = 3.2e-07; range, elevation)``, with ``N s
-    ago`` when the alarm is held from an earlier update."""
+    """``integrity FAULT: co-state mean T^2 41.2 > 16.3, p = 3.2e-07 (range, elevation)``, with ``N s
+    ago`` after the level when the alarm is held from an earlier update. No ``;`` inside: the status
+    message joins the causes with ``; ``."""
     s = report.alarm if report.alarm is not None else report.status
     when = f" {report.alarm_age:.1f} s ago" if report.alarm is not None else ""
     if report.level == "FAULT":
         test = f"co-state mean T^2 {s.statistic:.4g} > {s.threshold:.4g}"
     else:
         test = f"co-state mean T^2 {s.statistic:.4g}"
-    return f"integrity {report.level}{when}: {test} (p = {s.p_value:.2g}; {_components(s.components)})"
+    return f"integrity {report.level}{when}: {test}, p = {s.p_value:.2g} ({_components(s.components)})"
 
 
 def integrity_values(report, filter_name: str) -> list[tuple[str, str]]:

@@ -52,7 +52,7 @@ class EngineConfig:
     reinit_inflation: float = 4.0           # covariance factor when re-initialising after a failure
     reinit_hold: float = 10.0               # s (steady clock) the ERROR level is held after it
     monitor: dict | None = field(default_factory=dict)  # CostateMonitor keyword arguments; None: disabled
-    monitor_hold: float = 5.0               # s (steady clock) a monitor WARN/FAULT stays reported
+    monitor_hold: float = 5.0               # s (steady clock) a monitor WARN/FAULT stays reported; < 0: until reset
 
 
 @dataclass(frozen=True)
@@ -214,6 +214,7 @@ class EstimatorEngine:
             return False, "filter_error"
         if not self._check_core_recovery():
             self._feed_monitor(y)
+        self._prev_y = y
         self.last_update_ns = stamp_ns
         self.counters.accept(stream)
         return True, ""
@@ -377,6 +378,7 @@ class EstimatorEngine:
 
     # --- integrity -------------------------------------------------------------------------------------
     def _reset_monitor(self) -> None:
+        self._prev_y: np.ndarray | None = None  # y of the filter's last update (increment reference)
         if self.monitor is None:
             return
         if self.monitor.samples or getattr(self, "_skipped", 0):
@@ -386,14 +388,19 @@ class EstimatorEngine:
         self._alarms: dict[str, tuple[float, IntegrityStatus]] = {}
 
     def _feed_monitor(self, y: np.ndarray) -> None:
-        """Give the monitor the co-state of the update just made (never raises)."""
+        """Give the monitor the co-state of the update just made (never raises). The measured mask is
+        ``isfinite(y)``, and also ``isfinite(y_previous)`` for the GPF's increment reference (its
+        co-state is zero for a component not measured at the previous update; docs/integrity.md)."""
         if self.monitor is None or not self.has_costate:
             return
         if self._last_dt <= 0.0:
             self._skipped += 1
             return
+        measured = np.isfinite(y)
+        if getattr(self.filter, "reference", None) == "increment":
+            measured &= np.isfinite(self._prev_y) if self._prev_y is not None else False
         try:
-            status = self.monitor.update(np.asarray(self.filter.costate_mean, dtype=float), np.isfinite(y))
+            status = self.monitor.update(np.asarray(self.filter.costate_mean, dtype=float), measured)
         except Exception as err:  # noqa: BLE001 - e.g. a co-state of another shape: start again
             self.integrity_error = f"{type(err).__name__}: {err}"
             self._reset_monitor()
@@ -421,7 +428,7 @@ class EstimatorEngine:
             if held not in self._alarms or LEVEL_RANK[held] <= LEVEL_RANK[level]:
                 continue
             t, s = self._alarms[held]
-            if now - t < self.config.monitor_hold:
+            if self.config.monitor_hold < 0 or now - t < self.config.monitor_hold:
                 level, alarm, age = held, s, now - t
                 break
         return IntegrityReport("active", level, status, alarm, age, m.samples, m.rejected, self._skipped,

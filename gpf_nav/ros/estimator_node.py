@@ -92,8 +92,8 @@ def check_monitor_parameters(p: dict) -> list[str]:
     if not math.isfinite(quarantine) or (quarantine >= 0.0 and math.isfinite(alpha) and quarantine > alpha):
         errors.append(f"parameter 'monitor_quarantine_rate' = {quarantine!r} must be negative (default) or "
                       "lie in [0, monitor_false_alarm_rate]")
-    if not (math.isfinite(p["monitor_hold"]) and p["monitor_hold"] >= 0.0):
-        errors.append(f"parameter 'monitor_hold' = {p['monitor_hold']!r} must be >= 0")
+    if not math.isfinite(p["monitor_hold"]):
+        errors.append(f"parameter 'monitor_hold' = {p['monitor_hold']!r} must be finite (negative: latched)")
     return errors
 
 

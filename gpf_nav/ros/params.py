@@ -83,7 +83,7 @@ ESTIMATOR = [
     Spec("monitor_false_alarm_rate", 1e-3, "Monitor: per-update probability of FAULT (diagnostics ERROR) on a consistent filter, in (0, 1)."),
     Spec("monitor_warn_false_alarm_rate", 1e-2, "Monitor: per-update probability of WARN or worse on a consistent filter, in [monitor_false_alarm_rate, 1)."),
     Spec("monitor_quarantine_rate", -1.0, "Monitor: p-value below which a window is kept out of the reference; negative: monitor_false_alarm_rate / 100; 0: no quarantine."),
-    Spec("monitor_hold", 5.0, "A monitor WARN or FAULT stays in /diagnostics this long after the update that raised it [s, steady clock]."),
+    Spec("monitor_hold", 5.0, "A monitor WARN or FAULT stays in /diagnostics this long after the update that raised it [s, steady clock]; negative: latched until ~/reset or a re-initialisation."),
 ]
 
 SCENARIO_DESCRIPTIONS = {

@@ -39,6 +39,7 @@ import json
 import math
 import os
 import random
+import re
 import signal
 import subprocess
 import sys
@@ -110,6 +111,15 @@ def rss_kib(pid: int | str = "self") -> dict[str, int]:
     except OSError:
         pass
     return out
+
+
+def _second_half_growth(samples: list[tuple[float, float, int]]) -> int | None:
+    """RSS change [KiB] from the sample nearest the middle of the simulated span to the last one."""
+    if len(samples) < 3:
+        return None
+    middle = 0.5 * (samples[0][1] + samples[-1][1])
+    mid = min(samples, key=lambda s: abs(s[1] - middle))
+    return samples[-1][2] - mid[2]
 
 
 def _slope_per_hour(samples: list[tuple[float, float, int]]) -> float | None:
@@ -342,8 +352,8 @@ class Listener:
                 self.first_non_finite.setdefault("/diagnostics", ", ".join(bad)[:200])
             level = int.from_bytes(status.level, "little") if isinstance(status.level, bytes) else int(status.level)
             self.levels[("OK", "WARN", "ERROR", "STALE")[min(level, 3)]] += 1
-            for part in status.message.split("; "):
-                self.messages[part.split(":")[0].split(" (")[0]] += 1
+            for part in status.message.split("; "):  # causes, e.g. "integrity WARN 2.1 s ago: ..."
+                self.messages[re.sub(r" [0-9.]+ s ago$", "", part.split(":")[0].split(" (")[0])] += 1
             self.last_status, self.last_values = status, values
 
     def seen(self) -> int:
@@ -538,7 +548,7 @@ def _summarise(args, sim, ledger: Ledger, listener: Listener, alive: bool, exit_
         "completed": bool(sim.finished),
         "passed": all(checks.values()),
         "checks": checks,
-        "command": "python -m gpf_nav.ros.soak " + " ".join(_argv(args)),
+        "command": ("python -m gpf_nav.ros.soak " + " ".join(_argv(args))).rstrip(),
         "filter": args.filter,
         "particles": args.particles,
         "seed": args.seed,
@@ -571,6 +581,7 @@ def _summarise(args, sim, ledger: Ledger, listener: Listener, alive: bool, exit_
             "estimator_growth": growth, "estimator_peak": rss_end.get("VmHWM"),
             "estimator_max_sampled": max((s[2] for s in rss_samples), default=None),
             "estimator_slope_per_sim_hour": _round(_slope_per_hour(rss_samples)),
+            "estimator_second_half_growth": _second_half_growth(rss_samples),
             "soak_process_start": own_start.get("VmRSS"), "soak_process_end": own_end.get("VmRSS"),
             "samples": len(rss_samples),
         },
@@ -582,7 +593,7 @@ def _summarise(args, sim, ledger: Ledger, listener: Listener, alive: bool, exit_
         "diagnostics_causes": {k: n for k, n in listener.messages.items() if k != "tracking"},
         "final_diagnostics": {k: v.get(k) for k in (
             "initialized from", "reinitializations", "ESS", "integrity level", "integrity samples",
-            "integrity fault updates", "integrity warn updates", "integrity skipped updates",
+            "integrity components", "integrity fault updates", "integrity warn updates", "integrity skipped updates",
             "integrity resets", "accepted imu", "messages rejected")},
         "position_error_m": {"median": _round(float(np.median(errors))) if errors.size else None,
                              "p95": _round(float(np.percentile(errors, 95))) if errors.size else None,
@@ -618,8 +629,9 @@ def format_summary(s: dict) -> str:
     def mib(x):
         return "n/a" if x is None else f"{x / 1024:.1f} MiB"
     L.append(f"  estimator RSS: start {mib(r['estimator_start'])} (after {s['warmup_s']:g} s warm-up), "
-             f"end {mib(r['estimator_end'])}, growth {r['estimator_growth']} KiB, peak {mib(r['estimator_peak'])}, "
-             f"trend {r['estimator_slope_per_sim_hour']} KiB per simulated hour ({r['samples']} samples)")
+             f"end {mib(r['estimator_end'])}, peak {mib(r['estimator_peak'])}")
+    L.append(f"    growth {r['estimator_growth']} KiB ({r['estimator_second_half_growth']} KiB in the second half), "
+             f"least-squares trend {r['estimator_slope_per_sim_hour']} KiB per simulated hour, {r['samples']} samples")
     L.append(f"  soak process RSS: start {mib(r['soak_process_start'])}, end {mib(r['soak_process_end'])}")
     L.append("")
     L.append(f"  {'measurements from the simulator':34} {s['simulator_measurements']:>7}")
