@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpf_nav.filters.particle import ParticleFilter, gaussian_shift_correction
+from gpf_nav.filters.particle import ParticleFilter, gaussian_shift_correction, select_rows
 from gpf_nav.filters.projection import project
 from gpf_nav.models.base import StateSpaceModel
 
@@ -89,7 +89,7 @@ class GeometricProjectionPF(ParticleFilter):
         if self.reference == "innovation":
             H, r = self._innovation(states, y, rows)
         else:
-            H = self.model.measurement_jacobian(states)[:, rows, :]
+            H = select_rows(self.model.measurement_jacobian(states), rows)
             eta = np.einsum("nkj,nj->nk", H, self.model.drift(states, self.time, self._input))
             r = self.model.residual(y, self._previous_y)[rows] - eta * dt
         metric_factor = self._noise_factors(dt)[0] if self.metric == "process_noise" else None

@@ -251,7 +251,7 @@ class ParticleFilter(Filter):
                     ) -> tuple[np.ndarray, np.ndarray]:
         """Jacobian ``(N, k, n)`` and innovation ``y - h(x)`` ``(N, k)`` of the measured rows."""
         h, H = self.model.measure_and_jacobian(states)
-        return H[:, rows, :], self.model.residual(y, h)[:, rows]
+        return select_rows(H, rows), select_columns(self.model.residual(y, h), rows)
 
     # --- weighting -----------------------------------------------------------------------------------
     def _whitener(self, rows: np.ndarray) -> np.ndarray:
@@ -325,6 +325,19 @@ class BootstrapPF(ParticleFilter):
                         columns=self.model.measured_state_index)[1]
             self._costate[:, rows] = a / dt
         return None, 0.0
+
+
+def select_rows(H: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``H[:, rows, :]`` of a Jacobian ``(N, m, n)`` without a copy when every row is kept; the
+    selection runs on the particle-last layout the models build, so it copies contiguous rows."""
+    if rows.all():
+        return H
+    return H.transpose(1, 2, 0)[rows].transpose(2, 0, 1)
+
+
+def select_columns(r: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``r[:, rows]`` of ``(N, m)`` without a copy when every component is kept."""
+    return r if rows.all() else r.T[rows].T
 
 
 def gaussian_shift_correction(shift: np.ndarray, inverse_factor: np.ndarray, z: np.ndarray) -> np.ndarray:
