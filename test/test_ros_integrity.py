@@ -164,7 +164,7 @@ from std_srvs.srv import Trigger  # noqa: E402
 from gpf_nav.ros import conversions as conv  # noqa: E402
 from gpf_nav.ros.estimator_node import EstimatorNode  # noqa: E402
 from gpf_nav.ros.params import ParameterError  # noqa: E402
-from test_ros_nodes import _assert_diagnostics_finite, _latest_status, _rae, ros  # noqa: E402,F401
+from test_ros_nodes import _assert_diagnostics_finite, _rae, ros  # noqa: E402,F401
 
 ERROR, WARN = b"\x02", b"\x01"
 

@@ -30,7 +30,8 @@ compared with the ``rejected <reason>`` and ``accepted rae`` counters of the est
 
 Pass/fail (exit code 0/1): the run completed, the estimator process was alive to the end and exited
 cleanly on SIGINT, counters match the prediction exactly, no ``internal_error`` or ``filter_error``, no
-non-finite number on any output. RSS figures are reported, not judged. See docs/soak.md.
+non-finite number on any output, no ERROR/FATAL line or traceback in the estimator's log. RSS figures
+are reported, not judged. See docs/soak.md.
 """
 from __future__ import annotations
 
@@ -439,7 +440,6 @@ def run(args) -> dict:
         measuring = False
 
         rss_samples: list[tuple[float, float, int]] = []
-        own_samples: list[tuple[float, float, int]] = []
         rss_start = own_start = None
         next_sample = 0.0
         run_start = time.monotonic()
@@ -456,14 +456,15 @@ def run(args) -> dict:
                 measuring = True
                 rss_start, own_start = rss_kib(proc.pid), rss_kib()
                 rss_samples.append((time.monotonic() - run_start, sim_now, rss_start.get("VmRSS", 0)))
-                own_samples.append((time.monotonic() - run_start, sim_now, own_start.get("VmRSS", 0)))
                 next_sample = time.monotonic() + args.rss_period
             elif measuring and time.monotonic() >= next_sample:
                 rss_samples.append((time.monotonic() - run_start, sim_now, rss_kib(proc.pid).get("VmRSS", 0)))
-                own_samples.append((time.monotonic() - run_start, sim_now, rss_kib().get("VmRSS", 0)))
                 next_sample += args.rss_period
-        injector.flush()
         sim_wall = time.monotonic() - run_start
+        drain = time.monotonic() + 10.0  # the simulator's last messages reach the injector, then the held ones go
+        while time.monotonic() < drain and sum(injector.ledger.stream.values()) < sim.published["measurement"]:
+            executor.spin_once(timeout_sec=0.05)
+        injector.flush()
 
         # let the estimator count everything, then one more diagnostics message
         drain = time.monotonic() + 20.0
@@ -477,12 +478,11 @@ def run(args) -> dict:
         rss_end, own_end = rss_kib(proc.pid), rss_kib()
         if rss_end:
             rss_samples.append((time.monotonic() - run_start, sim_now, rss_end.get("VmRSS", 0)))
-            own_samples.append((time.monotonic() - run_start, sim_now, own_end.get("VmRSS", 0)))
 
         exit_code = _stop(proc)
         wall = time.monotonic() - wall_start
-        summary = _summarise(args, sim, injector.ledger, listener, alive, exit_code, _tail(log.name, 40),
-                             rss_start or {}, rss_end, rss_samples, own_start or {}, own_end, own_samples,
+        summary = _summarise(args, sim, injector.ledger, listener, alive, exit_code, _tail(log.name, 100_000),
+                             rss_start or {}, rss_end, rss_samples, own_start or {}, own_end,
                              sim_wall, wall)
         summary["estimator_log"] = log.name
         return summary
@@ -516,8 +516,8 @@ def _tail(path: str, lines: int = 20) -> str:
         return ""
 
 
-def _summarise(args, sim, ledger: Ledger, listener: Listener, alive: bool, exit_code: int, log_tail: str,
-               rss_start, rss_end, rss_samples, own_start, own_end, own_samples, sim_wall: float,
+def _summarise(args, sim, ledger: Ledger, listener: Listener, alive: bool, exit_code: int, log_text: str,
+               rss_start, rss_end, rss_samples, own_start, own_end, sim_wall: float,
                wall: float) -> dict:
     v = listener.last_values
     counted = {r: int(v.get(f"rejected {r}", -1)) for r in REASONS}
@@ -532,7 +532,8 @@ def _summarise(args, sim, ledger: Ledger, listener: Listener, alive: bool, exit_
     seen = accepted + int(v.get("measurements rejected", 0)) if v else -1
     errors = listener.errors()
     non_finite = sum(listener.non_finite.values())
-    log_problems = [line for line in log_tail.splitlines() if "Traceback" in line or "internal_error" in line]
+    log_problems = [line for line in log_text.splitlines() if "Traceback" in line or "internal_error" in line
+                    or "[ERROR]" in line or "[FATAL]" in line]
     checks = {
         "run completed": bool(sim.finished),
         "estimator alive to the end": alive,
@@ -540,6 +541,7 @@ def _summarise(args, sim, ledger: Ledger, listener: Listener, alive: bool, exit_
         "every message accounted for": accounted,
         "no internal_error or filter_error": counted["internal_error"] == 0 and counted["filter_error"] == 0,
         "no non-finite output": non_finite == 0 and listener.counts["odometry/filtered"] > 0,
+        "no ERROR, FATAL or traceback in the estimator log": not log_problems,
     }
     growth = None
     if rss_start.get("VmRSS") and rss_end.get("VmRSS"):
@@ -670,6 +672,8 @@ def format_summary(s: dict) -> str:
              + ("; causes: " + ", ".join(f"{k} {n}" for k, n in s["diagnostics_causes"].items())
                 if s["diagnostics_causes"] else ""))
     L.append("  final diagnostics: " + ", ".join(f"{k} {v}" for k, v in s["final_diagnostics"].items()))
+    for line in s["estimator_log_problems"]:
+        L.append(f"  estimator log: {line[:200]}")
     L.append("")
     for name, ok in s["checks"].items():
         L.append(f"  [{'PASS' if ok else 'FAIL'}] {name}")
