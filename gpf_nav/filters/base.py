@@ -102,6 +102,16 @@ class Filter(ABC):
             raise ValueError(f"measurement must have shape ({self.model.measurement_dim},), got {y.shape}")
         return y, np.isfinite(y)
 
+    def _measured_rows(self, y) -> tuple[np.ndarray, np.ndarray] | None:
+        """Start a Gaussian-type update: ``(y, mask)``, or None (and a zero ``last_log_likelihood``)
+        when nothing is measured."""
+        self._require_initialized()
+        y, mask = self._check_measurement(y)
+        if not mask.any():
+            self.last_log_likelihood = 0.0
+            return None
+        return y, mask
+
     @staticmethod
     def _check_dt(dt) -> float:
         dt = float(dt)

@@ -61,12 +61,11 @@ class EnsembleKF(Filter):
 
     def update(self, y: np.ndarray) -> None:
         """Condition on ``y`` ``(m,)``; NaN rows are not measured, an all-NaN ``y`` is a no-op."""
-        self._require_initialized()
-        y, mask = self._check_measurement(y)
-        k = np.count_nonzero(mask)
-        if k == 0:
-            self.last_log_likelihood = 0.0
+        measured = self._measured_rows(y)
+        if measured is None:
             return
+        y, mask = measured
+        k = np.count_nonzero(mask)
         model, X = self.model, self._X
         HX = model.measure(X)
         h_mean = model.measurement_mean(HX, self._weights)

@@ -151,12 +151,11 @@ class ExtendedKF(_GaussianFilter):
 
     def update(self, y: np.ndarray) -> None:
         """Condition on ``y`` ``(m,)``; NaN rows are not measured, an all-NaN ``y`` is a no-op."""
-        self._require_initialized()
-        y, mask = self._check_measurement(y)
-        k = np.count_nonzero(mask)
-        if k == 0:
-            self.last_log_likelihood = 0.0
+        measured = self._measured_rows(y)
+        if measured is None:
             return
+        y, mask = measured
+        k = np.count_nonzero(mask)
         x = self._x[None]
         hx, H = self.model.measure_and_jacobian(x)
         r, H = self.model.residual(y, hx[0]), H[0]
@@ -256,12 +255,11 @@ class UnscentedKF(_GaussianFilter):
 
     def update(self, y: np.ndarray) -> None:
         """Condition on ``y`` ``(m,)``; NaN rows are not measured, an all-NaN ``y`` is a no-op."""
-        self._require_initialized()
-        y, mask = self._check_measurement(y)
-        k = np.count_nonzero(mask)
-        if k == 0:
-            self.last_log_likelihood = 0.0
+        measured = self._measured_rows(y)
+        if measured is None:
             return
+        y, mask = measured
+        k = np.count_nonzero(mask)
         model = self.model
         E = self._sigma_offsets()
         Z = model.measure(self._x + E)
