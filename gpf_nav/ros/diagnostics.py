@@ -29,7 +29,7 @@ INTEGRITY_LEVEL = {"OK": OK, "WARN": WARN, "FAULT": ERROR}
 @dataclass
 class Thresholds:
     ess_warn: float = 0.05        # ESS/N below this is WARN
-    costate_warn: float = 1e7     # mean co-state norm (whitened units / s) above this is WARN
+    costate_warn: float = 1e7     # mean co-state norm (m^2/s, Euclidean metric) above this is WARN
     sensor_timeout: float = 10.0  # s without an accepted measurement is WARN
 
 

@@ -389,16 +389,20 @@ class EstimatorEngine:
 
     def _feed_monitor(self, y: np.ndarray) -> None:
         """Give the monitor the co-state of the update just made (never raises). The measured mask is
-        ``isfinite(y)``, and also ``isfinite(y_previous)`` for the GPF's increment reference (its
-        co-state is zero for a component not measured at the previous update; docs/integrity.md)."""
+        the filter's ``costate_measured`` (the components its last co-state covers). For a filter
+        without it: ``isfinite(y)``, and also ``isfinite(y_previous)`` for the GPF's increment
+        reference (its co-state is zero for a component not measured at the previous update)."""
         if self.monitor is None or not self.has_costate:
             return
         if self._last_dt <= 0.0:
             self._skipped += 1
             return
-        measured = np.isfinite(y)
-        if getattr(self.filter, "reference", None) == "increment":
-            measured &= np.isfinite(self._prev_y) if self._prev_y is not None else False
+        if hasattr(self.filter, "costate_measured"):
+            measured = np.array(self.filter.costate_measured, dtype=bool)
+        else:
+            measured = np.isfinite(y)
+            if getattr(self.filter, "reference", None) == "increment":
+                measured &= np.isfinite(self._prev_y) if self._prev_y is not None else False
         try:
             status = self.monitor.update(np.asarray(self.filter.costate_mean, dtype=float), measured)
         except Exception as err:  # noqa: BLE001 - e.g. a co-state of another shape: start again

@@ -71,7 +71,7 @@ ESTIMATOR = [
     Spec("max_published_particles", 100, "Particles published on gpf/particles (systematic selection); 0 disables."),
     Spec("diagnostics_period", 1.0, "Period of /diagnostics [s, steady clock]."),
     Spec("ess_warn_threshold", 0.05, "WARN when ESS/N falls below this.", live=True),
-    Spec("costate_warn_threshold", 1e7, "WARN when the mean co-state norm exceeds this [whitened units/s].", live=True),
+    Spec("costate_warn_threshold", 1e7, "WARN when the mean co-state norm exceeds this [m^2/s with the euclidean metric, 1/s with process_noise].", live=True),
     Spec("sensor_timeout", 10.0, "WARN when no measurement was accepted for this long [s, node clock].", live=True),
     Spec("reinit_hold", 10.0, "Diagnostics stay ERROR this long after a re-initialisation [s, steady clock]."),
     # integrity monitor (gpf_nav.integrity.CostateMonitor on the co-state; gpf, and spf with compute_costate)
