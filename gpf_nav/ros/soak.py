@@ -95,6 +95,8 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--rss-period", type=float, default=5.0, help="wall s between RSS samples (default 5)")
     ap.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: the environment's)")
     ap.add_argument("--timeout", type=float, default=None, help="wall-clock limit, s (default: generous)")
+    ap.add_argument("--keep-log", action="store_true",
+                    help="keep the estimator's log file (it is kept anyway when the soak fails)")
     ap.add_argument("--json", action="store_true", help="print the summary as JSON")
     return ap
 
@@ -484,7 +486,7 @@ def run(args) -> dict:
         summary = _summarise(args, sim, injector.ledger, listener, alive, exit_code, _tail(log.name, 100_000),
                              rss_start or {}, rss_end, rss_samples, own_start or {}, own_end,
                              sim_wall, wall)
-        summary["estimator_log"] = log.name
+        summary["estimator_log"] = log.name if (args.keep_log or not summary["passed"]) else None
         return summary
     finally:
         if proc.poll() is None:
@@ -494,6 +496,8 @@ def run(args) -> dict:
             n.destroy_node()
         rclpy.try_shutdown(context=context)
         log.close()
+        if not summary.get("estimator_log"):  # kept when the soak failed or --keep-log
+            Path(log.name).unlink(missing_ok=True)
 
 
 def _stop(proc) -> int:
@@ -613,7 +617,7 @@ def _argv(args) -> list[str]:
     out = []
     defaults = vars(_parser().parse_args([]))
     for key, value in vars(args).items():
-        if key in ("json", "timeout", "domain_id") or value == defaults.get(key):
+        if key in ("json", "timeout", "domain_id", "keep_log") or value == defaults.get(key):
             continue
         out += [f"--{key.replace('_', '-')}", f"{value:g}" if isinstance(value, float) else str(value)]
     return out
@@ -674,6 +678,8 @@ def format_summary(s: dict) -> str:
     L.append("  final diagnostics: " + ", ".join(f"{k} {v}" for k, v in s["final_diagnostics"].items()))
     for line in s["estimator_log_problems"]:
         L.append(f"  estimator log: {line[:200]}")
+    if s.get("estimator_log"):
+        L.append(f"  estimator log file: {s['estimator_log']}")
     L.append("")
     for name, ok in s["checks"].items():
         L.append(f"  [{'PASS' if ok else 'FAIL'}] {name}")
