@@ -20,7 +20,7 @@ MU_MOON = 4.9028e12
 MOON_RADIUS = 1.7374e6
 """Mean lunar radius, m."""
 
-MAX_SUBSTEPS = 1000
+MAX_SUBSTEPS = 200
 """Cap on the integration sub-steps of one :meth:`LunarDescentModel.transition` call."""
 _MIN_RANGE_SQ = 1.0  # m^2: floor that keeps h and H finite with the vehicle at the station
 _MIN_HORIZONTAL_SQ = 1e-6  # m^2: floor for the azimuth derivative at elevation +-pi/2
