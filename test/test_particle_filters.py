@@ -146,3 +146,21 @@ def test_costate_statistics_are_consistent():
     assert f.costate_norm_mean == pytest.approx(f.weights @ norms)
     assert np.allclose(f.costate_mean, f.weights @ f.costate)
     assert 0.0 < f.ess <= 1.0
+
+
+def test_lunar_jacobian_rows_are_orthogonal_and_the_fast_projection_agrees():
+    """The lunar model declares orthogonal Jacobian rows; the division must equal the full solve."""
+    from gpf_nav.filters.projection import project
+    model = LunarDescentModel()
+    rng = np.random.default_rng(0)
+    x = lunar_start()[0] + rng.normal(size=(200, 6)) * [1e5, 1e5, 1e5, 1.0, 1.0, 1.0]
+    H = model.measurement_jacobian(x)
+    gram = np.einsum("nij,nkj->nik", H, H)
+    off = gram - np.einsum("nii->ni", gram)[:, :, None] * np.eye(3)
+    assert np.abs(off).max() < 1e-12 * np.abs(gram).max()
+    r = rng.normal(size=(200, 3)) * [30.0, 5e-4, 5e-4]
+    W = np.diag(1.0 / np.sqrt(np.diag(model.measurement_noise())))
+    fast = project(H, r, W, 1e-6, columns=(0, 1, 2), orthogonal_rows=True)
+    full = project(H, r, W, 1e-6, columns=(0, 1, 2), orthogonal_rows=False)
+    assert np.allclose(fast[0], full[0], rtol=1e-9, atol=1e-9)
+    assert np.allclose(fast[1], full[1], rtol=1e-9, atol=1e-12)

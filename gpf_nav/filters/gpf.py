@@ -94,11 +94,12 @@ class GeometricProjectionPF(ParticleFilter):
             r = self.model.residual(y, self._previous_y)[rows] - eta * dt
         metric_factor = self._noise_factors(dt)[0] if self.metric == "process_noise" else None
         shift, a = project(H, r, self._whitener(rows), self.regularization, metric_factor,
-                           self.model.measured_state_index)
+                           self.model.measured_state_index, self.model.orthogonal_jacobian_rows)
         self._costate[:, rows] = a / dt
         self._costate_rows = rows
-        correction = gaussian_shift_correction(shift, inverse_factor, z) if self.weighting == "corrected" else 0.0
-        return shift, correction
+        if self.weighting == "likelihood":
+            return shift, 0.0
+        return shift, gaussian_shift_correction(shift, inverse_factor, z)
 
     def _after_update(self, y, rows):
         self._previous_y = np.where(rows, y, np.nan)

@@ -322,7 +322,8 @@ class BootstrapPF(ParticleFilter):
             H, r = self._innovation(x_pred.T, y, rows)
             self._costate_rows = rows
             a = project(H, r, self._whitener(rows), self.regularization,
-                        columns=self.model.measured_state_index)[1]
+                        columns=self.model.measured_state_index,
+                        orthogonal_rows=self.model.orthogonal_jacobian_rows)[1]
             self._costate[:, rows] = a / dt
         return None, 0.0
 

@@ -25,8 +25,8 @@ from gpf_nav.linalg import solve_spd
 
 
 def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float,
-            metric_factor: np.ndarray | None = None, columns: tuple[int, ...] | None = None
-            ) -> tuple[np.ndarray, np.ndarray]:
+            metric_factor: np.ndarray | None = None, columns: tuple[int, ...] | None = None,
+            orthogonal_rows: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Projection shift and whitened co-state increment.
 
     Args:
@@ -36,6 +36,9 @@ def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float,
         regularization: Tikhonov ``eps``: relative for the Euclidean metric, absolute otherwise.
         metric_factor: ``L`` ``(n, n)`` of the state metric ``L L^T``; None for the Euclidean metric.
         columns: the state components ``h`` depends on (other columns of ``H`` are zero); None: all.
+        orthogonal_rows: the rows of ``H`` are mutually orthogonal (as for range, azimuth and
+            elevation); with a diagonal ``W`` and the Euclidean metric ``H H^T`` is then diagonal and
+            the solve is a division.
 
     Returns:
         ``shift`` ``(n, N)`` to add to the particles and ``a = (Hw Hw^T + eps I)^-1 W r`` ``(N, k)``
@@ -48,22 +51,27 @@ def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float,
     columns = _as_index(range(H.shape[2]) if columns is None else columns)
     Ht = Ht[:, columns]
     diagonal = np.diag(W)
-    if np.count_nonzero(W) == np.count_nonzero(diagonal):
-        Hw = Ht * diagonal[:, None, None]
-    else:
-        Hw = np.einsum("ij,jcn->icn", W, Ht)
+    diagonal_w = np.count_nonzero(W) == np.count_nonzero(diagonal)
+    Hw = Ht * diagonal[:, None, None] if diagonal_w else np.einsum("ij,jcn->icn", W, Ht)
     rw = W @ r.T
-    S = np.einsum("icn,jcn->ijn", Hw, Hw)
-    k = S.shape[0]
-    trace = np.einsum("iin->n", S)
+    k = rw.shape[0]
+    if orthogonal_rows and diagonal_w and metric_factor is None:
+        S = np.einsum("icn,icn->in", Hw, Hw)  # the diagonal of H_w H_w^T, (k, N)
+        trace = S.sum(axis=0)
+    else:
+        S = np.einsum("icn,jcn->ijn", Hw, Hw)
+        trace = np.einsum("iin->n", S)
     # relative Tikhonov term; a zero Jacobian (degenerate geometry) gets unit damping and a zero shift
     if metric_factor is None:
         damping = np.where(trace > 0.0, regularization * trace / k, 1.0)
     else:
         damping = np.full_like(trace, regularization)
-    for i in range(k):
-        S[i, i] += damping
-    a = solve_spd(S, rw)
+    if S.ndim == 2:
+        a = rw / (S + damping)
+    else:
+        for i in range(k):
+            S[i, i] += damping
+        a = solve_spd(S, rw)
     a[~np.isfinite(a)] = 0.0
     shift = np.zeros((H.shape[2], H.shape[0]))
     shift[columns] = np.einsum("icn,in->cn", Hw, a)

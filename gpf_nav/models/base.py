@@ -36,6 +36,9 @@ class StateSpaceModel(ABC):
         velocity_index: indices of the velocity components (may be empty).
         measured_state_index: indices of the state components ``h`` depends on (the other columns of
             ``H`` are zero); None means all. Lets the projection skip structural zeros.
+        orthogonal_jacobian_rows: the rows of ``H`` are mutually orthogonal everywhere (true of
+            range/azimuth/elevation, the gradients of spherical coordinates); lets the projection
+            replace its small solve by a division when ``R`` is diagonal.
     """
 
     state_dim: int
@@ -44,6 +47,7 @@ class StateSpaceModel(ABC):
     position_index: tuple[int, ...] = ()
     velocity_index: tuple[int, ...] = ()
     measured_state_index: tuple[int, ...] | None = None
+    orthogonal_jacobian_rows: bool = False
 
     @abstractmethod
     def drift(self, x: np.ndarray, t: float = 0.0, u: np.ndarray | None = None) -> np.ndarray:

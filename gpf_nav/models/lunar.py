@@ -45,6 +45,7 @@ class LunarDescentModel(StateSpaceModel):
     position_index = (0, 1, 2)
     velocity_index = (3, 4, 5)
     measured_state_index = (0, 1, 2)
+    orthogonal_jacobian_rows = True
 
     def __init__(self, mu: float = MU_MOON, mu_scale: float = 1.0, station=(0.0, 0.0, 0.0),
                  range_noise_std: float = 30.0, angle_noise_std: float = math.radians(0.03),
