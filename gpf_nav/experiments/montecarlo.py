@@ -35,7 +35,7 @@ import numpy as np
 from gpf_nav.experiments import metrics
 from gpf_nav.experiments.parallel import default_workers, map_tasks
 from gpf_nav.experiments.runner import (ALIASES, DEFAULT_PARTICLES, EXTRA_FILTERS, FILTERS, GPF_DEFAULT,
-                                        PARTICLE_FILTERS, RunTask, run_task)
+                                        GPF_PRINTED, PARTICLE_FILTERS, RunTask, run_task)
 from gpf_nav.scenario import CASES, ScenarioConfig
 
 SCHEMA = "gpf_nav.montecarlo/1"
@@ -270,7 +270,7 @@ def markdown(report: dict) -> str:
             lines.append(
                 f"| {name} | {_pm(row['velocity_rmse_mps'])} | {_pm(row['ess'], 3)} | "
                 f"{_sig(row['costate_norm'])} | {_sig(row['nees'])} | "
-                f"{'n/a' if in_band is None else f'{100 * in_band:.0f} %'} | "
+                f"{'n/a' if in_band is None or not np.isfinite(in_band) else f'{100 * in_band:.0f} %'} | "
                 f"{fail['diverged']} / {fail['nonfinite']} of {fail['runs']} | "
                 f"{'reference' if name == s['reference_filter'] else _p(case['wilcoxon'].get(name))} |")
         if band:
@@ -369,7 +369,7 @@ def draw_figures(report: dict, figures: dict, out: Path) -> list[Path]:
     if any(d["ess"] for d in cases.values()):
         paths.append(plots.ess_evolution(times, {c: d["ess"] for c, d in cases.items()}, runs,
                                          report["settings"]["ess_threshold"], out / "ess.png"))
-    degeneracy = {c: {n: p for n, p in d["points"].items() if n in ("SPF", GPF_DEFAULT)}
+    degeneracy = {c: {n: p for n, p in d["points"].items() if n in ("SPF", GPF_DEFAULT, GPF_PRINTED)}
                   for c, d in cases.items()}
     if any(degeneracy.values()):
         paths.append(plots.costate_degeneracy(degeneracy, {c: d["correlations"] for c, d in cases.items()},

@@ -12,6 +12,8 @@ import numpy as np
 CASE_TITLES = {"full": "Case 1: full observability (range, azimuth, elevation)",
                "partial": "Case 2: partial observability (range, elevation; no azimuth)"}
 
+_SHORT_CASE = {"full": "Case 1 (full obs.)", "partial": "Case 2 (partial obs.)"}
+
 _COLOURS = {
     "GPF (innovation, likelihood)": "#d62728",
     "GPF as printed (increment, likelihood)": "#ff7f0e",
@@ -57,7 +59,7 @@ def error_evolution(times: np.ndarray, errors: dict, runs: int, path: Path) -> P
     """
     plt = _pyplot()
     cases = list(errors)
-    fig, axes = plt.subplots(1, len(cases), figsize=(7.0 * len(cases), 5.0), squeeze=False)
+    fig, axes = plt.subplots(1, len(cases), figsize=(7.0 * len(cases), 5.0), squeeze=False, layout="constrained")
     for ax, case in zip(axes[0], cases):
         for name, series in errors[case].items():
             km = np.asarray(series) / 1e3
@@ -70,7 +72,7 @@ def error_evolution(times: np.ndarray, errors: dict, runs: int, path: Path) -> P
         ax.set_ylabel("position error |r_hat - r| (km)")
         ax.set_title(CASE_TITLES.get(case, case), fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
-    axes[0][0].legend(fontsize=8, loc="best")
+    _shared_legend(fig, axes[0][0])
     fig.suptitle(f"Position error over time: median of {runs} Monte Carlo runs, shaded 10-90 % of runs")
     return _save(fig, path)
 
@@ -79,20 +81,20 @@ def ess_evolution(times: np.ndarray, ess: dict, runs: int, threshold: float, pat
     """ESS/N (before resampling) against time, mean over runs, particle filters only."""
     plt = _pyplot()
     cases = list(ess)
-    fig, axes = plt.subplots(1, len(cases), figsize=(7.0 * len(cases), 4.5), squeeze=False)
+    fig, axes = plt.subplots(1, len(cases), figsize=(7.0 * len(cases), 4.5), squeeze=False, layout="constrained")
     for ax, case in zip(axes[0], cases):
         for name, series in ess[case].items():
             s = np.asarray(series)
             mean = np.nanmean(s, axis=0)
             ax.plot(times, mean, style(name), color=colour(name), lw=1.2,
-                    label=f"{name} (time average {np.nanmean(s):.3f})")
+                    label=f"{name}: {np.nanmean(s):.3f}")
         ax.axhline(threshold, color="k", lw=0.8, ls=":", label=f"resampling threshold {threshold:g}")
         ax.set_ylim(-0.02, 1.05)
         ax.set_xlabel("time since apolune (s)")
         ax.set_ylabel("effective sample size / N (after weighting)")
         ax.set_title(CASE_TITLES.get(case, case), fontsize=10)
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=8, loc="center right")
+        ax.legend(fontsize=8, loc="lower left", title="time average of ESS/N", title_fontsize=8)
     fig.suptitle(f"Normalised effective sample size, mean of {runs} Monte Carlo runs")
     return _save(fig, path)
 
@@ -101,7 +103,7 @@ def nees_evolution(times: np.ndarray, nees: dict, band: tuple[float, float], run
     """Run-averaged NEES against time (log scale) with the 95 % chi-square band of a consistent filter."""
     plt = _pyplot()
     cases = list(nees)
-    fig, axes = plt.subplots(1, len(cases), figsize=(7.0 * len(cases), 4.5), squeeze=False)
+    fig, axes = plt.subplots(1, len(cases), figsize=(7.0 * len(cases), 4.5), squeeze=False, layout="constrained")
     for ax, case in zip(axes[0], cases):
         for name, series in nees[case].items():
             avg = np.mean(np.asarray(series), axis=0)  # NaN where any run's covariance was singular
@@ -116,7 +118,7 @@ def nees_evolution(times: np.ndarray, nees: dict, band: tuple[float, float], run
         ax.set_ylabel("NEES averaged over runs (dimensionless, 6 dof)")
         ax.set_title(CASE_TITLES.get(case, case), fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
-    axes[0][0].legend(fontsize=7, loc="best")
+    _shared_legend(fig, axes[0][0], columns=3)
     fig.suptitle(f"Filter consistency: normalised estimation error squared, mean of {runs} runs "
                  f"(a consistent filter stays in the grey band)")
     return _save(fig, path)
@@ -126,9 +128,9 @@ def rmse_boxplot(per_run: dict, path: Path) -> Path:
     """Distribution over runs of the position RMSE (km), one box per filter, one panel per case."""
     plt = _pyplot()
     cases = list(per_run)
-    fig, axes = plt.subplots(1, len(cases), figsize=(7.0 * len(cases), 4.8), squeeze=False)
-    for ax, case in zip(axes[0], cases):
-        names = list(per_run[case])
+    fig, axes = plt.subplots(1, len(cases), figsize=(7.0 * len(cases), 4.8), squeeze=False, layout="constrained")
+    for column, (ax, case) in enumerate(zip(axes[0], cases)):
+        names = list(per_run[case])[::-1]  # first filter on top
         data = [np.asarray(per_run[case][n], dtype=float) for n in names]
         data = [d[np.isfinite(d)] for d in data]
         try:
@@ -138,7 +140,7 @@ def rmse_boxplot(per_run: dict, path: Path) -> Path:
         for patch, name in zip(box["boxes"], names):
             patch.set_facecolor(colour(name))
             patch.set_alpha(0.5)
-        ax.set_yticks(range(1, len(names) + 1), names, fontsize=8)
+        ax.set_yticks(range(1, len(names) + 1), names if column == 0 else [""] * len(names), fontsize=8)
         ax.set_xscale("log")
         ax.set_xlabel("position RMSE over the run (km)")
         ax.set_title(CASE_TITLES.get(case, case), fontsize=10)
@@ -157,7 +159,7 @@ def costate_degeneracy(points: dict, correlations: dict, runs: int, path: Path) 
     """
     plt = _pyplot()
     cases = list(points)
-    fig, axes = plt.subplots(len(cases), 2, figsize=(13.0, 4.8 * len(cases)), squeeze=False)
+    fig, axes = plt.subplots(len(cases), 2, figsize=(13.0, 4.8 * len(cases)), squeeze=False, layout="constrained")
     for row, case in enumerate(cases):
         ax_c, ax_e = axes[row]
         for name, p in points[case].items():
@@ -174,14 +176,20 @@ def costate_degeneracy(points: dict, correlations: dict, runs: int, path: Path) 
             ax.set_yscale("log")
             ax.grid(True, which="both", alpha=0.3)
             ax.legend(fontsize=8, markerscale=3, loc="best")
-        ax_c.set_ylabel("mean co-state norm |lambda| (whitened measurement units / s)")
+        ax_c.set_ylabel("mean co-state norm |lambda| (m^2/s)")
         ax_e.set_ylabel("position error (km)")
-        label = CASE_TITLES.get(case, case)
-        ax_c.set_title(f"({'ac'[row % 2]}) co-state vs degeneracy - {label}", fontsize=9)
-        ax_e.set_title(f"({'bd'[row % 2]}) error vs degeneracy - {label}", fontsize=9)
+        label = _SHORT_CASE.get(case, case)
+        ax_c.set_title(f"({'abcdefgh'[2 * row]}) {label}: co-state norm vs ESS/N", fontsize=10)
+        ax_e.set_title(f"({'abcdefgh'[2 * row + 1]}) {label}: position error vs ESS/N", fontsize=10)
     fig.suptitle(f"Co-state, degeneracy and error, one point per time step of {runs} runs "
                  f"(rho: Pearson correlation over all steps)")
     return _save(fig, path)
+
+
+def _shared_legend(fig, ax, columns: int = 4) -> None:
+    """One legend for the whole figure, below the panels, so no curve is hidden behind it."""
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=columns, fontsize=8, frameon=False)
 
 
 def _fmt_r(value) -> str:
@@ -196,7 +204,7 @@ def sweep(values: np.ndarray, table: dict, param_label: str, runs: int, path: Pa
     """
     plt = _pyplot()
     cases = list(table)
-    fig, axes = plt.subplots(1, len(cases), figsize=(7.0 * len(cases), 4.8), squeeze=False)
+    fig, axes = plt.subplots(1, len(cases), figsize=(7.0 * len(cases), 4.8), squeeze=False, layout="constrained")
     for ax, case in zip(axes[0], cases):
         for name, rows in table[case].items():
             mean = np.array([np.nan if r["mean"] is None else r["mean"] for r in rows])
@@ -210,6 +218,6 @@ def sweep(values: np.ndarray, table: dict, param_label: str, runs: int, path: Pa
         ax.set_ylabel("position RMSE (km), mean +- std over runs")
         ax.set_title(CASE_TITLES.get(case, case), fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
-    axes[0][0].legend(fontsize=8, loc="best")
+    _shared_legend(fig, axes[0][0])
     fig.suptitle(f"Position RMSE against {param_label.split(' (')[0]}, {runs} Monte Carlo runs per point")
     return _save(fig, path)
