@@ -125,10 +125,11 @@ def git_commit() -> str | None:
     return head + ("+dirty" if dirty else "")
 
 
-def run_metadata(args, wall: float, argv) -> dict:
+def run_metadata(args, wall: float, argv, commit: str | None = None) -> dict:
+    """Facts about the execution that do not change the numbers (wall time, engine, commit, ...)."""
     return {"wall_seconds": round(wall, 2), "workers": None if args.scheduler else
             (args.workers or default_workers()), "scheduler": args.scheduler,
-            "git_commit": git_commit(), "command": "gpf-nav " + " ".join(argv),
+            "git_commit": commit or git_commit(), "command": "gpf-nav " + " ".join(argv),
             "python": platform.python_version(), "numpy": np.__version__, "machine": platform.machine(),
             "started": time.strftime("%Y-%m-%d %H:%M:%S %Z", time.localtime(time.time() - wall))}
 
@@ -390,11 +391,12 @@ def main(argv: list[str] | None = None) -> int:
     config = base_config(args)
     filters = parse_filters(args.filters)
     cases = parse_cases(args.cases)
+    commit = git_commit()  # the code this process runs; read before a long campaign
     start = time.perf_counter()
     report, figures = campaign(config, cases, args.runs, args.seed, filters, args.particles,
                                args.divergence_km, args.workers, args.scheduler, not args.no_progress)
     wall = time.perf_counter() - start
-    report["meta"] = run_metadata(args, wall, ["montecarlo"] + argv)
+    report["meta"] = run_metadata(args, wall, ["montecarlo"] + argv, commit)
     report["meta"]["seconds_per_run"] = figures["seconds_per_run"]
     args.out.mkdir(parents=True, exist_ok=True)
     write_json(report, args.out / "results.json")

@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from gpf_nav.experiments import metrics
-from gpf_nav.experiments.montecarlo import (add_common_arguments, base_config, parse_cases, parse_filters,
+from gpf_nav.experiments.montecarlo import (add_common_arguments, base_config, git_commit, parse_cases,
+                                            parse_filters,
                                             per_run_values, run_metadata, write_json)
 from gpf_nav.experiments.parallel import map_tasks
 from gpf_nav.experiments.runner import RunTask, run_task
@@ -111,12 +112,13 @@ def main(argv: list[str] | None = None) -> int:
     field, defaults, label = PARAMETERS[args.param]
     values = [float(v) for v in args.values.split(",")] if args.values else list(defaults)
     config = base_config(args)
+    commit = git_commit()  # the code this process runs; read before a long campaign
     start = time.perf_counter()
     report = sweep(args.param, values, config, parse_cases(args.cases), args.runs, args.seed,
                    parse_filters(args.filters), args.particles, args.divergence_km, args.workers,
                    args.scheduler, not args.no_progress)
     wall = time.perf_counter() - start
-    report["meta"] = run_metadata(args, wall, ["sweep"] + argv)
+    report["meta"] = run_metadata(args, wall, ["sweep"] + argv, commit)
     args.out.mkdir(parents=True, exist_ok=True)
     json_path = args.out / f"sweep_{args.param}.json"
     md_path = args.out / f"sweep_{args.param}.md"
