@@ -6,12 +6,15 @@
     gpf-nav integrity    co-state monitor false alarms and detection delays (``gpf_nav.experiments.integrity``)
     gpf-nav demo         simulator + estimator over ROS 2, with a summary (``gpf_nav.ros.demo``)
 
-Sub-command modules are imported lazily, so e.g. ``bench`` needs neither ROS nor matplotlib.
+Sub-command modules are imported lazily, so e.g. ``bench`` needs neither ROS nor matplotlib. Every
+sub-command runs with the heap tuning of :mod:`gpf_nav.allocator`.
 """
 from __future__ import annotations
 
 import importlib
 import sys
+
+from gpf_nav.allocator import retain_freed_memory
 
 COMMANDS = {
     "bench": "gpf_nav.experiments.bench",
@@ -28,6 +31,7 @@ def main(argv: list[str] | None = None) -> int:
     if not argv or argv[0] in ("-h", "--help") or argv[0] not in COMMANDS:
         print(__doc__.strip())
         return 0 if argv and argv[0] in ("-h", "--help") else 2
+    retain_freed_memory()
     module = importlib.import_module(COMMANDS[argv[0]])
     return int(module.main(argv[1:]) or 0)
 

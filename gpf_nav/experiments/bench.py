@@ -2,7 +2,9 @@
 
 Each filter runs on the same seeded lunar-descent measurements. A step is timed over a block of
 steps; the reported figure is the median block time per step over ``--repeats`` blocks, after a warm-up.
-The GPF/SPF ratio compares figures measured in the same run. ``--node`` runs the ROS node-latency
+The GPF/SPF ratio compares figures measured in the same run. ``gpf-nav bench`` runs with the heap
+tuning of :mod:`gpf_nav.allocator` (the report says whether it was applied); ``python -m
+gpf_nav.experiments.bench`` runs with the C library's default allocator, for comparison. ``--node`` runs the ROS node-latency
 benchmark instead (``gpf_nav.ros.latency``).
 """
 from __future__ import annotations
@@ -15,6 +17,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from gpf_nav import allocator
 from gpf_nav.filters import BootstrapPF, EnsembleKF, ExtendedKF, GeometricProjectionPF, UnscentedKF
 from gpf_nav.scenario import ScenarioConfig, filter_model, generate
 
@@ -70,7 +73,8 @@ def run(particle_counts=PARTICLE_COUNTS, repeats: int = 5, seed: int = 0) -> dic
     ratios = {str(n): per[("GPF", n)] / per[("SPF", n)] for n in particle_counts}
     return {"results": results, "gpf_over_spf": ratios,
             "machine": {"python": platform.python_version(), "numpy": np.__version__,
-                        "processor": platform.machine()}}
+                        "processor": platform.machine(),
+                        "allocator": "retain_freed_memory" if allocator.retained else "default"}}
 
 
 def format_table(report: dict) -> str:
@@ -82,6 +86,7 @@ def format_table(report: dict) -> str:
         shown = f"{us:9.1f} us" if us < 1000 else f"{us / 1000:9.2f} ms"
         lines.append(f"{r['filter']:<6} {n:>8} {shown:>12}")
     lines.append("GPF/SPF: " + ", ".join(f"N={n}: {v:.2f}" for n, v in report["gpf_over_spf"].items()))
+    lines.append(f"allocator: {report['machine']['allocator']}")
     return "\n".join(lines)
 
 
@@ -102,3 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     report = run(tuple(args.particles), args.repeats)
     print(json.dumps(report, indent=2) if args.json else format_table(report))
     return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -159,14 +159,17 @@ class ParticleFilter(Filter):
         y, rows = self._check_measurement(y)
         dt = self._pending_dt
         n = self.model.state_dim
-        inverse_factor = z = None
-        noise = 0.0
+        factor = inverse_factor = z = None
         if dt > 0.0:
             factor, inverse_factor = self._noise_factors(dt)
             z = self.rng.standard_normal((n, self.n_particles))
-            noise = factor @ z
         shift, log_correction = self._propose(self._x, y, rows, dt, inverse_factor, z)
-        x = self._x + noise if shift is None else self._x + shift + noise
+        # a new array (views handed out as `particles` keep the predicted state), built in place
+        x = self._x.copy() if z is None else np.matmul(factor, z)
+        if z is not None:
+            x += self._x
+        if shift is not None:
+            x += shift
         self._x = x
         self._pending_dt = 0.0
         increment = log_correction

@@ -50,16 +50,21 @@ def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float,
         columns = None
     columns = _as_index(range(H.shape[2]) if columns is None else columns)
     Ht = Ht[:, columns]
-    diagonal = np.diag(W)
-    diagonal_w = np.count_nonzero(W) == np.count_nonzero(diagonal)
-    Hw = Ht * diagonal[:, None, None] if diagonal_w else np.einsum("ij,jcn->icn", W, Ht)
+    # With a diagonal whitener w, W H = diag(w) H is never formed: w goes into S and into a instead.
+    w = np.diag(W)
+    if np.count_nonzero(W) == np.count_nonzero(w):
+        Hw, scale = Ht, w
+    else:
+        Hw, scale = np.einsum("ij,jcn->icn", W, Ht), np.ones(W.shape[0])
     rw = W @ r.T
     k = rw.shape[0]
-    if orthogonal_rows and diagonal_w and metric_factor is None:
+    if orthogonal_rows and Hw is Ht and metric_factor is None:
         S = np.einsum("icn,icn->in", Hw, Hw)  # the diagonal of H_w H_w^T, (k, N)
+        S *= (scale * scale)[:, None]
         trace = S.sum(axis=0)
     else:
         S = np.einsum("icn,jcn->ijn", Hw, Hw)
+        S *= np.outer(scale, scale)[:, :, None]
         trace = np.einsum("iin->n", S)
     # relative Tikhonov term; a zero Jacobian (degenerate geometry) gets unit damping and a zero shift
     if metric_factor is None:
@@ -67,14 +72,15 @@ def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float,
     else:
         damping = np.full_like(trace, regularization)
     if S.ndim == 2:
-        a = rw / (S + damping)
+        S += damping
+        a = rw / S
     else:
         for i in range(k):
             S[i, i] += damping
         a = solve_spd(S, rw)
     a[~np.isfinite(a)] = 0.0
     shift = np.zeros((H.shape[2], H.shape[0]))
-    shift[columns] = np.einsum("icn,in->cn", Hw, a)
+    shift[columns] = np.einsum("icn,in->cn", Hw, a * scale[:, None])
     if metric_factor is not None:
         shift = metric_factor @ shift
     return shift, a.T

@@ -24,6 +24,17 @@ def wrap_angle(a: np.ndarray) -> np.ndarray:
     return a - _TWO_PI * np.ceil((a - np.pi) * (1.0 / _TWO_PI))
 
 
+def _angle_columns(angular: np.ndarray) -> slice | np.ndarray | None:
+    """The angular components as a slice when they are consecutive (one wrap, no gather), else their
+    indices; None when there are none."""
+    index = np.flatnonzero(angular)
+    if index.size == 0:
+        return None
+    if index[-1] - index[0] + 1 == index.size:
+        return slice(int(index[0]), int(index[-1]) + 1)
+    return index
+
+
 class StateSpaceModel(ABC):
     """A continuous-time state-space model ``dx = f(x,t,u) dt + G dB``, ``y = h(x) + v``.
 
@@ -89,8 +100,9 @@ class StateSpaceModel(ABC):
         Shapes broadcast: ``(m,)`` against ``(N, m)`` gives ``(N, m)``.
         """
         r = np.asarray(y, dtype=float) - y_pred
-        for i in np.flatnonzero(self.angular):
-            r[..., i] = wrap_angle(r[..., i])
+        angles = _angle_columns(self.angular)
+        if angles is not None:
+            r[..., angles] = wrap_angle(r[..., angles])
         return r
 
     def measurement_mean(self, y: np.ndarray, weights: np.ndarray) -> np.ndarray:

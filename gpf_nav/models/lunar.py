@@ -151,18 +151,19 @@ class LunarDescentModel(StateSpaceModel):
 
     def _jacobian(self, d, h2, rho2):
         h2 = np.maximum(h2, _MIN_HORIZONTAL_SQ)
-        rho2 = np.maximum(rho2, _MIN_RANGE_SQ)
-        inv_rho = 1.0 / np.sqrt(rho2)
+        inv_rho2 = 1.0 / np.maximum(rho2, _MIN_RANGE_SQ)
         hor = np.sqrt(h2)
         jac = np.zeros((3, 6, d.shape[1]))
-        jac[0, :3] = d * inv_rho
+        np.multiply(d, np.sqrt(inv_rho2), out=jac[0, :3])
         inv_h2 = 1.0 / h2
-        jac[1, 0] = -d[1] * inv_h2
-        jac[1, 1] = d[0] * inv_h2
-        k = -d[2] * inv_rho * inv_rho / hor
-        jac[2, 0] = k * d[0]
-        jac[2, 1] = k * d[1]
-        jac[2, 2] = hor * inv_rho * inv_rho
+        np.multiply(d[1], inv_h2, out=jac[1, 0])
+        np.negative(jac[1, 0], out=jac[1, 0])
+        np.multiply(d[0], inv_h2, out=jac[1, 1])
+        k = d[2] * inv_rho2
+        k /= -hor
+        np.multiply(k, d[0], out=jac[2, 0])
+        np.multiply(k, d[1], out=jac[2, 1])
+        np.multiply(hor, inv_rho2, out=jac[2, 2])
         return jac.transpose(2, 0, 1)
 
     def measurement_noise(self):

@@ -26,6 +26,7 @@ from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 from diagnostic_msgs.msg import DiagnosticArray
 
+from gpf_nav.allocator import retain_freed_memory
 from gpf_nav.ros import conversions as conv
 from gpf_nav.ros import diagnostics as diag
 from gpf_nav.ros import validation as val
@@ -405,6 +406,7 @@ class EstimatorNode(Node):
 
 def main(argv: list[str] | None = None) -> int:
     """Console script ``estimator``: returns 2 (after a FATAL log line) on invalid parameters."""
+    retain_freed_memory()
     rclpy.init(args=sys.argv if argv is None else argv)
     try:
         node = EstimatorNode()

@@ -1,0 +1,46 @@
+"""Heap tuning for processes that run a particle filter: keep freed memory instead of returning it.
+
+A filter step allocates and frees a few arrays of ``N x n`` floats (megabytes at N = 10,000). With
+glibc's default, adaptive policy such blocks are given back to the kernel at every ``free`` (``mmap``
+or a heap trim) and taken again at the next step, so each step pays hundreds of page faults: at
+N = 10,000 this was about 0.9 ms of the GPF's 2.2 ms step on the development machine. Fixing the
+``mmap`` threshold at 32 MiB and the trim threshold at 128 MiB keeps those blocks in the heap: the
+process keeps up to that much freed memory, and a step stops faulting.
+
+The ``gpf-nav`` command and the ROS nodes call :func:`retain_freed_memory` at start-up; a program of
+your own that runs the filters can do the same. It changes nothing but speed and resident memory.
+"""
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import sys
+
+M_TRIM_THRESHOLD = -1
+M_MMAP_THRESHOLD = -3
+MMAP_THRESHOLD = 32 * 1024 * 1024
+"""Blocks below this size come from the heap (32 MiB is glibc's largest allowed value on 64 bit)."""
+TRIM_THRESHOLD = 128 * 1024 * 1024
+"""Freed memory at the top of the heap is returned to the kernel only beyond this size."""
+retained = False
+"""Whether :func:`retain_freed_memory` has been applied in this process."""
+
+
+def retain_freed_memory() -> bool:
+    """Set glibc's ``mmap`` and trim thresholds (see the module docstring) for this process.
+
+    Returns True when applied; False, changing nothing, on a C library without ``mallopt``
+    (macOS, Windows, musl) or when glibc refuses a value.
+    """
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):
+        return False
+    mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
+    mallopt.restype = ctypes.c_int
+    global retained
+    retained = bool(mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD)) and bool(mallopt(M_TRIM_THRESHOLD, TRIM_THRESHOLD))
+    return retained
