@@ -79,11 +79,10 @@ class GeometricProjectionPF(ParticleFilter):
         self._input = u
 
     def _propose(self, x_pred, y, rows, dt, inverse_factor, z):
-        self._costate = np.zeros_like(self._costate)
-        self._costate_rows = np.zeros_like(rows)
         if self.reference == "increment":
             rows = rows & np.isfinite(self._previous_y)
         if dt == 0.0 or not rows.any() or (self.weighting == "corrected" and inverse_factor is None):
+            self._set_costate(None, rows, dt)
             return None, 0.0
         states = x_pred.T
         if self.reference == "innovation":
@@ -95,8 +94,7 @@ class GeometricProjectionPF(ParticleFilter):
         metric_factor = self._noise_factors(dt)[0] if self.metric == "process_noise" else None
         shift, a = project(H, r, self._whitener(rows), self.regularization, metric_factor,
                            self.model.measured_state_index, self.model.orthogonal_jacobian_rows)
-        self._costate[:, rows] = a / dt
-        self._costate_rows = rows
+        self._set_costate(a, rows, dt)
         if self.weighting == "likelihood":
             return shift, 0.0
         return shift, gaussian_shift_correction(shift, inverse_factor, z)

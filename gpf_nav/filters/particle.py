@@ -66,7 +66,7 @@ class ParticleFilter(Filter):
         self._weights = np.full(self.n_particles, 1.0 / self.n_particles)
         self._pending_dt = 0.0
         self._R = np.asarray(model.measurement_noise(), dtype=float)
-        self._whiteners: dict[bytes, np.ndarray] = {}
+        self._whiteners: dict[bytes, tuple[np.ndarray, float]] = {}
         self._noise_cache: tuple[float, np.ndarray | None, np.ndarray | None] = (-1.0, None, None)
         self.ess = 1.0
         self.resampled = False
@@ -247,6 +247,22 @@ class ParticleFilter(Filter):
         """
         return None, 0.0
 
+    def _set_costate(self, a: np.ndarray | None, rows: np.ndarray, dt: float) -> None:
+        """Keep the co-state ``a / dt`` of the measured ``rows`` (``a`` ``(N, k)``), zero for the other
+        components; ``a = None`` clears it (no new array when it is already clear)."""
+        m = self.model.measurement_dim
+        if a is None:
+            if self._costate_rows.any():
+                self._costate = np.zeros((self.n_particles, m))
+                self._costate_rows = np.zeros(m, bool)
+            return
+        if rows.all():
+            costate = a / dt
+        else:
+            costate = np.zeros((self.n_particles, m))
+            costate[:, rows] = a / dt
+        self._costate, self._costate_rows = costate, rows
+
     def _after_update(self, y, rows) -> None:
         """Hook run after weighting and resampling (the GPF keeps its measurement history here)."""
 
@@ -258,19 +274,28 @@ class ParticleFilter(Filter):
 
     # --- weighting -----------------------------------------------------------------------------------
     def _whitener(self, rows: np.ndarray) -> np.ndarray:
-        """``W`` ``(k, k)`` with ``W R_rows W^T = I`` for the measured rows."""
+        """``W`` with ``W R_rows W^T = I`` for the measured rows: ``(k, k)``, or its diagonal ``(k,)``
+        when ``R_rows`` is diagonal (what :func:`project` and the likelihood take)."""
+        return self._whitening(rows)[0]
+
+    def _whitening(self, rows: np.ndarray) -> tuple[np.ndarray, float]:
+        """``(W, log of the Gaussian normalising constant)`` of the measured rows, cached per mask."""
         key = rows.tobytes()
         if key not in self._whiteners:
             r = self._R[np.ix_(rows, rows)]
-            self._whiteners[key] = np.linalg.inv(np.linalg.cholesky(r))
+            w = np.linalg.inv(np.linalg.cholesky(r))
+            constant = np.log(np.diag(w)).sum() - 0.5 * rows.sum() * np.log(2.0 * np.pi)
+            if np.count_nonzero(w) == np.count_nonzero(np.diag(w)):
+                w = np.diag(w).copy()
+            self._whiteners[key] = (w, float(constant))
         return self._whiteners[key]
 
     def _log_likelihood(self, x: np.ndarray, y: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """Gaussian ``log p(y_rows | x)`` ``(N,)`` for particles ``x`` ``(n, N)``."""
-        e = self.model.residual(y, self.model.measure(x.T))
-        w = self._whitener(rows)
-        ew = w @ e.T[rows]  # (k, N)
-        constant = np.log(np.diag(w)).sum() - 0.5 * rows.sum() * np.log(2.0 * np.pi)
+        e = self.model.residual(y, self.model.measure(x.T)).T  # (m, N)
+        w, constant = self._whitening(rows)
+        e = e if rows.all() else e[rows]
+        ew = e * w[:, None] if w.ndim == 1 else w @ e  # (k, N)
         return constant - 0.5 * np.einsum("kn,kn->n", ew, ew)
 
     def _reweight(self, increment) -> bool:
@@ -319,15 +344,13 @@ class BootstrapPF(ParticleFilter):
         self.regularization = float(regularization)
 
     def _propose(self, x_pred, y, rows, dt, inverse_factor, z):
-        self._costate = np.zeros_like(self._costate)
-        self._costate_rows = np.zeros_like(rows)
+        a = None
         if self.compute_costate and dt > 0.0 and rows.any():
             H, r = self._innovation(x_pred.T, y, rows)
-            self._costate_rows = rows
             a = project(H, r, self._whitener(rows), self.regularization,
                         columns=self.model.measured_state_index,
                         orthogonal_rows=self.model.orthogonal_jacobian_rows)[1]
-            self._costate[:, rows] = a / dt
+        self._set_costate(a, rows, dt)
         return None, 0.0
 
 

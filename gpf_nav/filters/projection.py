@@ -19,6 +19,8 @@ Two metrics for the state space:
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from gpf_nav.linalg import solve_spd
@@ -32,7 +34,7 @@ def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float,
     Args:
         H: measurement Jacobian of the measured rows ``(N, k, n)``.
         r: reference innovation of those rows ``(N, k)`` (angles already wrapped).
-        W: whitener ``(k, k)`` of the rows' noise covariance.
+        W: whitener ``(k, k)`` of the rows' noise covariance, or its diagonal ``(k,)``.
         regularization: Tikhonov ``eps``: relative for the Euclidean metric, absolute otherwise.
         metric_factor: ``L`` ``(n, n)`` of the state metric ``L L^T``; None for the Euclidean metric.
         columns: the state components ``h`` depends on (other columns of ``H`` are zero); None: all.
@@ -48,27 +50,32 @@ def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float,
     if metric_factor is not None:
         Ht = np.einsum("kjn,jc->kcn", Ht, metric_factor)
         columns = None
-    columns = _as_index(range(H.shape[2]) if columns is None else columns)
+    columns = _as_index(tuple(range(H.shape[2])) if columns is None else tuple(columns))
     Ht = Ht[:, columns]
+    k = W.shape[0]
     # With a diagonal whitener w, W H = diag(w) H is never formed: w goes into S and into a instead.
-    w = np.diag(W)
-    if np.count_nonzero(W) == np.count_nonzero(w):
-        Hw, scale = Ht, w
+    if W.ndim == 1:
+        w, diagonal = W, True
     else:
-        Hw, scale = np.einsum("ij,jcn->icn", W, Ht), np.ones(W.shape[0])
-    rw = W @ r.T
-    k = rw.shape[0]
-    if orthogonal_rows and Hw is Ht and metric_factor is None:
+        w = np.diag(W)
+        diagonal = np.count_nonzero(W) == np.count_nonzero(w)
+    if diagonal:
+        Hw, rw = Ht, r.T * w[:, None]
+    else:
+        Hw, rw = np.einsum("ij,jcn->icn", W, Ht), W @ r.T
+    if orthogonal_rows and diagonal and metric_factor is None:
         S = np.einsum("icn,icn->in", Hw, Hw)  # the diagonal of H_w H_w^T, (k, N)
-        S *= (scale * scale)[:, None]
+        S *= (w * w)[:, None]
         trace = S.sum(axis=0)
     else:
         S = np.einsum("icn,jcn->ijn", Hw, Hw)
-        S *= np.outer(scale, scale)[:, :, None]
+        if diagonal:
+            S *= np.outer(w, w)[:, :, None]
         trace = np.einsum("iin->n", S)
     # relative Tikhonov term; a zero Jacobian (degenerate geometry) gets unit damping and a zero shift
     if metric_factor is None:
-        damping = np.where(trace > 0.0, regularization * trace / k, 1.0)
+        damping = trace * (regularization / k)
+        damping[trace <= 0.0] = 1.0
     else:
         damping = np.full_like(trace, regularization)
     if S.ndim == 2:
@@ -80,13 +87,14 @@ def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float,
         a = solve_spd(S, rw)
     a[~np.isfinite(a)] = 0.0
     shift = np.zeros((H.shape[2], H.shape[0]))
-    shift[columns] = np.einsum("icn,in->cn", Hw, a * scale[:, None])
+    shift[columns] = np.einsum("icn,in->cn", Hw, a * w[:, None] if diagonal else a)
     if metric_factor is not None:
         shift = metric_factor @ shift
     return shift, a.T
 
 
-def _as_index(columns) -> slice | list[int]:
+@lru_cache(maxsize=64)
+def _as_index(columns: tuple[int, ...]) -> slice | list[int]:
     """A slice (a view, no copy) when ``columns`` are consecutive, else the list of indices."""
     columns = list(columns)
     if columns == list(range(columns[0], columns[-1] + 1)):

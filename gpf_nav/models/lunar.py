@@ -22,8 +22,9 @@ MOON_RADIUS = 1.7374e6
 
 MAX_SUBSTEPS = 200
 """Cap on the integration sub-steps of one :meth:`LunarDescentModel.transition` call."""
-_MIN_RANGE_SQ = 1.0  # m^2: floor that keeps h and H finite with the vehicle at the station
-_MIN_HORIZONTAL_SQ = 1e-6  # m^2: floor for the azimuth derivative at elevation +-pi/2
+_MIN_RANGE_SQ = 1.0  # m^2: floor of |r|^2 that keeps gravity finite at the Moon's centre
+_MIN_RANGE = 1.0  # m: floor of the range that keeps H finite with the vehicle at the station
+_MIN_HORIZONTAL = 1e-3  # m: floor for the azimuth derivative at elevation +-pi/2
 
 
 class LunarDescentModel(StateSpaceModel):
@@ -130,14 +131,14 @@ class LunarDescentModel(StateSpaceModel):
 
     # --- measurements -------------------------------------------------------------------------------
     def _line_of_sight(self, x):
+        """Line of sight ``d`` ``(3, N)`` from the station, its horizontal length and its range ``(N,)``."""
         d = x.T[:3] - self.station[:, None]
         h2 = d[0] * d[0] + d[1] * d[1]
         rho2 = h2 + d[2] * d[2]
-        return d, h2, rho2
+        return d, np.sqrt(h2), np.sqrt(rho2)
 
-    def _measure(self, d, h2, rho2):
-        horizontal = np.sqrt(h2)
-        return np.stack([np.sqrt(rho2), np.arctan2(d[1], d[0]), np.arctan2(d[2], horizontal)]).T
+    def _measure(self, d, horizontal, rho):
+        return np.stack([rho, np.arctan2(d[1], d[0]), np.arctan2(d[2], horizontal)]).T
 
     def measure(self, x):
         return self._measure(*self._line_of_sight(x))
@@ -149,13 +150,13 @@ class LunarDescentModel(StateSpaceModel):
         los = self._line_of_sight(x)
         return self._measure(*los), self._jacobian(*los)
 
-    def _jacobian(self, d, h2, rho2):
-        h2 = np.maximum(h2, _MIN_HORIZONTAL_SQ)
-        inv_rho2 = 1.0 / np.maximum(rho2, _MIN_RANGE_SQ)
-        hor = np.sqrt(h2)
+    def _jacobian(self, d, horizontal, rho):
+        hor = np.maximum(horizontal, _MIN_HORIZONTAL)
+        inv_rho = 1.0 / np.maximum(rho, _MIN_RANGE)
+        inv_rho2 = inv_rho * inv_rho
         jac = np.zeros((3, 6, d.shape[1]))
-        np.multiply(d, np.sqrt(inv_rho2), out=jac[0, :3])
-        inv_h2 = 1.0 / h2
+        np.multiply(d, inv_rho, out=jac[0, :3])
+        inv_h2 = 1.0 / (hor * hor)
         np.multiply(d[1], inv_h2, out=jac[1, 0])
         np.negative(jac[1, 0], out=jac[1, 0])
         np.multiply(d[0], inv_h2, out=jac[1, 1])
