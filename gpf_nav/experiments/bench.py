@@ -4,8 +4,8 @@ Each filter runs on the same seeded lunar-descent measurements. A step is timed 
 steps; the reported figure is the median block time per step over ``--repeats`` blocks, after a warm-up.
 The GPF/SPF ratio compares figures measured in the same run. ``gpf-nav bench`` runs with the heap
 tuning of :mod:`gpf_nav.allocator` (the report says whether it was applied); ``python -m
-gpf_nav.experiments.bench`` runs with the C library's default allocator, for comparison. ``--node`` runs the ROS node-latency
-benchmark instead (``gpf_nav.ros.latency``).
+gpf_nav.experiments.bench`` runs with the C library's default allocator, for comparison.
+``--node`` runs the ROS node-latency benchmark instead (``gpf_nav.ros.latency``).
 """
 from __future__ import annotations
 

@@ -164,9 +164,11 @@ class ParticleFilter(Filter):
             factor, inverse_factor = self._noise_factors(dt)
             z = self.rng.standard_normal((n, self.n_particles))
         shift, log_correction = self._propose(self._x, y, rows, dt, inverse_factor, z)
-        # a new array (views handed out as `particles` keep the predicted state), built in place
-        x = self._x.copy() if z is None else np.matmul(factor, z)
-        if z is not None:
+        # a new array, so views handed out as `particles` keep the predicted state
+        if z is None:
+            x = self._x.copy()
+        else:
+            x = factor @ z
             x += self._x
         if shift is not None:
             x += shift
