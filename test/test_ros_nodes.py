@@ -114,7 +114,7 @@ def _assert_diagnostics_finite(diagnostics):
 
 # --- simulator -> estimator ---------------------------------------------------------------------------
 def test_simulator_to_estimator_on_sim_time_tracks_truth(ros):
-    duration, start = 200.0, 1000.0
+    sim_seconds, start = 200.0, 1000.0
     odom = ros.record(Odometry, "odometry/filtered")
     truth = ros.record(Odometry, "truth/odometry")
     ess = ros.record(Float64, "gpf/ess")
@@ -127,15 +127,15 @@ def test_simulator_to_estimator_on_sim_time_tracks_truth(ros):
         Parameter("diagnostics_period", value=0.5),
         Parameter("queue_depth", value=50)]))  # a stalled test executor makes the simulator release bursts
     sim = ros.add(SimulatorNode(context=ros.context, parameter_overrides=[
-        Parameter("rate_factor", value=25.0), Parameter("scenario.duration", value=duration),
+        Parameter("rate_factor", value=25.0), Parameter("scenario.duration", value=sim_seconds),
         Parameter("start_time", value=start), Parameter("start_delay", value=1.5)]))
     assert ros.spin_until(lambda: sim.finished, 120.0), "the simulator did not finish"
     ros.spin_for(1.5)
 
     # simulated time: every stamp is on the simulated clock, none on the wall clock
     stamps = [conv.stamp_to_ns(m.header.stamp) for m in odom]
-    assert stamps and min(stamps) >= start * S and max(stamps) <= (start + duration + 1.0) * S
-    assert max(conv.stamp_to_ns(m.clock) for m in clock) == (start + duration) * S
+    assert stamps and min(stamps) >= start * S and max(stamps) <= (start + sim_seconds + 1.0) * S
+    assert max(conv.stamp_to_ns(m.clock) for m in clock) == (start + sim_seconds) * S
     # accuracy against truth at the measurement stamps (after the 10-measurement initialisation)
     truth_at = {conv.stamp_to_ns(m.header.stamp): conv.odometry_state(m) for m in truth}
     errors = np.array([conv.odometry_state(m) - truth_at[conv.stamp_to_ns(m.header.stamp)]

@@ -39,7 +39,8 @@ def test_demo_runs_end_to_end_and_prints_a_summary(private_domain, capsys):
 
 def test_demo_text_summary(private_domain, capsys):
     from gpf_nav.ros.demo import main
-    assert main(["--duration", "40", "--rate-factor", "20", "--filter", "ekf"]) == 0
+    forty_simulated_seconds = ["--duration", "40", "--rate-factor", "20", "--filter", "ekf"]
+    assert main(forty_simulated_seconds) == 0
     out = capsys.readouterr().out
     assert "position RMSE vs truth" in out and "mean ESS/N" in out and "n/a" in out
 
