@@ -7,8 +7,8 @@ N = 10,000 this was about 0.9 ms of the GPF's 2.2 ms step on the development mac
 ``mmap`` threshold at 32 MiB and the trim threshold at 128 MiB keeps those blocks in the heap: the
 process keeps up to that much freed memory, and a step stops faulting.
 
-The ``gpf-nav`` command and the ROS nodes call :func:`retain_freed_memory` at start-up; a program of
-your own that runs the filters can do the same. It changes nothing but speed and resident memory.
+The ``gpf-nav`` command and the ``estimator`` node call :func:`retain_freed_memory` at start-up; a
+program of your own that runs the filters can do the same. It changes nothing but speed and resident memory.
 """
 from __future__ import annotations
 

@@ -26,7 +26,6 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Imu
 
-from gpf_nav.allocator import retain_freed_memory
 from gpf_nav.ros import conversions as conv
 from gpf_nav.ros.params import ParameterError, declare, simulator_specs
 from gpf_nav.ros.playback import NS, build_events
@@ -170,7 +169,6 @@ class SimulatorNode(Node):
 
 def main(argv: list[str] | None = None) -> int:
     """Console script ``simulator``: exits 0 at the end of the trajectory, 2 on invalid parameters."""
-    retain_freed_memory()
     rclpy.init(args=sys.argv if argv is None else argv)
     try:
         node = SimulatorNode()
