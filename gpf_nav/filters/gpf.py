@@ -1,53 +1,85 @@
 """The Geometric Projection Particle Filter (paper Algorithm 1, projection written consistently).
 
-Each update moves the predicted particles ``x^-`` onto the measurement-consistent subspace,
+Each update moves the predicted particles ``x^-`` towards the measurement-consistent subspace,
 
-    x = x^- + H^T (H H^T + eps I)^-1 r + L z,      Q(dt) = L L^T,  z ~ N(0, I),
+    x = x^- + M H^T (H M H^T + eps R)^-1 r + noise,
 
-then weights them. Options:
+with ``r = y - h(x^-)`` (angles wrapped), then weights them. ``metric`` chooses ``M``:
 
-* ``reference="innovation"``: ``r = y - h(x^-)`` (angles wrapped); ``reference="increment"``:
-  ``r = (y_k - y_{k-1}) - eta(x^-) dt`` with ``eta = H f(x^-)``, the measurement increment as printed
-  in Algorithm 1 (no projection on the first update, or for a component not measured last time).
-* ``weighting="likelihood"``: ``w *= p(y | x)``, as in the paper's experiments (not exact: the posterior
-  is biased by the proposal); ``weighting="corrected"``: also ``* p(x | x_prev) / q(x | x_prev, y)``,
-  which for this Gaussian-shift proposal is ``exp(-s.z - |s|^2/2)`` with ``s = L^-1 shift``; the
-  posterior is then exact as N grows. It needs ``Q(dt)`` positive definite; where it is not (``dt = 0``,
-  a noise-free model), the update does not project.
+* ``"cloud"`` (default, the navigation-grade configuration): ``M = D``, the covariance of the predicted
+  cloud read as a moment-preserving kernel mixture (:mod:`gpf_nav.filters.kernel`) plus ``Q(dt)``, with
+  ``eps = 1``. The projection is then the linearised locally optimal proposal of the smoothed prediction:
+  it corrects every state the measurement is correlated with (velocity and the unmodelled acceleration,
+  not only position), the perturbed draw keeps the posterior spread, and the weights
+  ``p(y | x) N(x; centre, D) / q(x)`` are exact, so the cloud's covariance means what it says. The model
+  is augmented with an estimated unmodelled acceleration (:class:`ModelErrorCompensation`) unless
+  ``unmodelled_acceleration_std = 0``: the co-state drives its correction.
+* ``"euclidean"`` (the paper): ``M = I``, ``H^T (H H^T + eps I)^-1`` with ``H`` and ``r`` whitened and
+  ``eps`` relative, noise ``L z`` (``Q = L L^T``) added. It moves position only.
+* ``"process_noise"``: ``M = Q(dt)``; with ``eps = 1`` the mean of the locally optimal proposal of the
+  nominal model (noise still ``L z``).
 
-* ``metric="euclidean"`` (the paper: ``H^T (H H^T + eps I)^-1``, ``eps`` relative) or
-  ``metric="process_noise"``: the projection in the metric of ``Q(dt)``,
-  ``Q H^T (H Q H^T + eps R)^-1`` (``eps`` absolute), which moves velocity with position the way the
-  process noise correlates them. With ``eps = 1`` it is the mean of the locally optimal proposal, which
-  keeps the ``corrected`` weights well spread; the Euclidean full projection shifts position alone and
-  its exact weights degenerate quickly (see docs/filters.md).
+Options of the paper's configurations: ``reference="increment"`` uses
+``r = (y_k - y_{k-1}) - eta(x^-) dt`` with ``eta = H f(x^-)``, the increment as printed in Algorithm 1 (no
+projection on the first update, or for a component not measured last time); ``weighting="likelihood"``
+multiplies the weights by ``p(y | x)`` only, as in the paper's experiments (not exact: the posterior is
+biased by the proposal); ``weighting="corrected"`` also by ``p(x | x_prev) / q(x | x_prev, y)``. For the
+Euclidean and process-noise metrics that needs ``Q(dt)`` positive definite; where it is not
+(``dt = 0``, a noise-free model), the update does not project.
 
-The geometric co-state ``lambda = (H H^T + eps I)^-1 r / dt`` is kept per particle (whitened units).
+The geometric co-state ``lambda = (H_w M_w H_w^T + eps I)^-1 W r / dt`` is kept per particle (whitened
+measurement units per second).
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from gpf_nav.filters.kernel import match_moments, optimal_bandwidth, shrink
 from gpf_nav.filters.particle import ParticleFilter, gaussian_shift_correction, select_rows
-from gpf_nav.filters.projection import project
+from gpf_nav.filters.projection import _as_index, cloud_projection, project
+from gpf_nav.linalg import cholesky_or_none, solve_spd_logdet
 from gpf_nav.models.base import StateSpaceModel
+from gpf_nav.models.compensation import ModelErrorCompensation
 
 REFERENCES = ("innovation", "increment")
-METRICS = ("euclidean", "process_noise")
-WEIGHTINGS = ("likelihood", "corrected")
+METRICS = ("cloud", "euclidean", "process_noise")
+WEIGHTINGS = ("corrected", "likelihood")
+DEFAULT_REGULARIZATION = {"cloud": 1.0, "euclidean": 1e-6, "process_noise": 1e-6}
+"""Tikhonov ``eps`` of each metric when none is given (1: the measurement noise itself, for ``cloud``)."""
+UNMODELLED_ACCELERATION_STD = 0.03
+"""Default stationary standard deviation of the unmodelled acceleration (state units / s^2; m/s^2)."""
+UNMODELLED_ACCELERATION_TIME = 300.0
+"""Default correlation time of the unmodelled acceleration, s."""
 
 
 class GeometricProjectionPF(ParticleFilter):
     """GPF: the SMC loop with the geometric projection proposal.
 
+    ``GeometricProjectionPF(model)`` is the navigation-grade configuration (cloud metric, exact weights,
+    unmodelled-acceleration compensation). The paper's filter is
+    ``GeometricProjectionPF(model, metric="euclidean", weighting="likelihood", unmodelled_acceleration_std=0)``.
+
+    With compensation on, the filter runs on ``ModelErrorCompensation(model)``: :attr:`model` is that
+    augmented model, :attr:`particles` are augmented ``(N, n + p)``, but :meth:`initialize` takes the
+    user's prior (``(n,)``; an augmented ``(n + p,)`` prior is accepted too) and :attr:`mean` /
+    :attr:`covariance` are those of the user's state; :attr:`unmodelled_acceleration` and its covariance
+    give the estimated extra acceleration.
+
     Args:
         model: the state-space model.
         n_particles: number of particles N.
-        reference: ``innovation`` (default) or ``increment`` (Algorithm 1 as printed).
-        weighting: ``likelihood`` (default, the paper's experiments) or ``corrected`` (exact).
-        metric: ``euclidean`` (default, the paper) or ``process_noise``.
+        reference: ``innovation`` (default) or ``increment`` (Algorithm 1 as printed; not with ``cloud``).
+        weighting: ``corrected`` (default, exact) or ``likelihood`` (the paper's experiments).
+        metric: ``cloud`` (default), ``euclidean`` (the paper) or ``process_noise``.
         regularization: Tikhonov ``eps`` > 0 of the projection (dimensionless; relative for the
-            Euclidean metric, in units of the measurement noise for ``process_noise``).
+            Euclidean metric, in units of the measurement noise otherwise); default per metric,
+            :data:`DEFAULT_REGULARIZATION`.
+        unmodelled_acceleration_std: stationary std of the estimated unmodelled acceleration (state units
+            per s^2); 0 turns the compensation off.
+        unmodelled_acceleration_time: its correlation time, s.
+        kernel_bandwidth: ``h`` of the cloud metric's kernel in (0, 1); default the Gaussian-optimal one.
         resampling: resampling scheme name.
         ess_threshold: tau in (0, 1].
         seed: seed of the filter's random generator.
@@ -55,28 +87,161 @@ class GeometricProjectionPF(ParticleFilter):
     """
 
     def __init__(self, model: StateSpaceModel, n_particles: int = 500, reference: str = "innovation",
-                 weighting: str = "likelihood", metric: str = "euclidean", regularization: float = 1e-6,
-                 resampling: str = "systematic", ess_threshold: float = 0.5,
-                 seed: int | np.random.Generator | None = None, collapse_steps: int = 0):
-        super().__init__(model, n_particles, resampling, ess_threshold, seed, collapse_steps)
+                 weighting: str = "corrected", metric: str = "cloud", regularization: float | None = None,
+                 unmodelled_acceleration_std: float = UNMODELLED_ACCELERATION_STD,
+                 unmodelled_acceleration_time: float = UNMODELLED_ACCELERATION_TIME,
+                 kernel_bandwidth: float | None = None, resampling: str = "systematic",
+                 ess_threshold: float = 0.5, seed: int | np.random.Generator | None = None,
+                 collapse_steps: int = 0):
         if reference not in REFERENCES:
             raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r}")
         if weighting not in WEIGHTINGS:
             raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
         if metric not in METRICS:
             raise ValueError(f"metric must be one of {METRICS}, got {metric!r}")
+        if metric == "cloud" and reference == "increment":
+            raise ValueError("reference='increment' needs metric 'euclidean' or 'process_noise'")
+        if regularization is None:
+            regularization = DEFAULT_REGULARIZATION[metric]
         if not float(regularization) > 0.0:
             raise ValueError(f"regularization must be positive, got {regularization}")
+        if kernel_bandwidth is not None and not 0.0 < float(kernel_bandwidth) < 1.0:
+            raise ValueError(f"kernel_bandwidth must lie in (0, 1), got {kernel_bandwidth}")
+        self.nominal_model = model
+        if float(unmodelled_acceleration_std) > 0.0:
+            model = ModelErrorCompensation(model, unmodelled_acceleration_time, unmodelled_acceleration_std)
+        super().__init__(model, n_particles, resampling, ess_threshold, seed, collapse_steps)
         self.reference = reference
         self.weighting = weighting
         self.metric = metric
         self.regularization = float(regularization)
+        self.kernel_bandwidth = (optimal_bandwidth(self.n_particles, model.state_dim)
+                                 if kernel_bandwidth is None else float(kernel_bandwidth))
         self._previous_y = np.full(model.measurement_dim, np.nan)
         self._input = None
+        self._proposal = None
+        self._weighted_moments = None
+        self.moment_correction = True
 
+    # --- the user's state and the compensation ----------------------------------------------------------
+    @property
+    def compensated(self) -> bool:
+        """True when the filter estimates an unmodelled acceleration."""
+        return self.model is not self.nominal_model
+
+    @property
+    def mean(self):
+        return super().mean[:self.nominal_model.state_dim]
+
+    @property
+    def covariance(self):
+        n = self.nominal_model.state_dim
+        return self.augmented_covariance[:n, :n]
+
+    @property
+    def augmented_mean(self) -> np.ndarray:
+        """Mean ``(n + p,)`` of the filter's whole state (the user's state, then the compensation)."""
+        return super().mean
+
+    @property
+    def augmented_covariance(self) -> np.ndarray:
+        """Covariance ``(n + p, n + p)`` of the filter's whole state."""
+        return super().covariance
+
+    @property
+    def unmodelled_acceleration(self) -> np.ndarray:
+        """Estimated unmodelled acceleration ``(p,)`` (empty without compensation)."""
+        return self.augmented_mean[self.nominal_model.state_dim:]
+
+    @property
+    def unmodelled_acceleration_covariance(self) -> np.ndarray:
+        """Its covariance ``(p, p)``."""
+        n = self.nominal_model.state_dim
+        return self.augmented_covariance[n:, n:]
+
+    def initialize(self, mean, cov):
+        mean = np.asarray(mean, dtype=float).reshape(-1)
+        if self.compensated and mean.shape == (self.nominal_model.state_dim,):
+            mean, cov = self.model.augment_prior(mean, np.asarray(cov, dtype=float))
+        super().initialize(mean, cov)
+        self._previous_y = np.full(self.model.measurement_dim, np.nan)
+
+    # --- the proposal ---------------------------------------------------------------------------------
     def predict(self, dt, u=None):
         super().predict(dt, u)
         self._input = u
+
+    def _sample(self, x_pred, y, rows, dt):
+        if self.metric != "cloud" or not rows.any():
+            return super()._sample(x_pred, y, rows, dt)
+        centres, D = shrink(x_pred, self._weights, self.kernel_bandwidth)
+        if dt > 0.0:
+            D = D + self.model.process_noise(dt)
+        C = cholesky_or_none(D)
+        if C is None:  # a collapsed cloud on a noise-free model: nothing to project with
+            self._set_costate(None, rows, dt)
+            return super()._sample(x_pred, y, rows, dt)
+        n, k = self.model.state_dim, int(np.count_nonzero(rows))
+        z = self.rng.standard_normal((n, self.n_particles))
+        v = self.rng.standard_normal((k, self.n_particles))
+        H, r = self._innovation(centres.T, y, rows)
+        W = self._whitener(rows)
+        columns = _as_index(tuple(range(n)) if self.model.measured_state_index is None
+                            else tuple(self.model.measured_state_index))
+        Ht = H.transpose(1, 2, 0)[:, columns]  # (k, c, N): the columns h depends on
+        if W.ndim == 1:
+            Hw, wr = Ht * W[:, None, None], r.T * W[:, None]
+        else:
+            Hw, wr = np.einsum("ij,jcn->icn", W, Ht), W @ r.T
+        G = np.einsum("kcn,cj->kjn", Hw, C[columns])  # W H C, (k, n, N)
+        eps = self.regularization
+        perturbation = math.sqrt(eps) * v
+        perturbation -= np.einsum("kjn,jn->kn", G, z)
+        a, a_u, s_u, s_r, log_det = cloud_projection(G, wr, perturbation, eps)
+        prior_z = z + s_u  # C^-1 (x - proposal mean)
+        white = prior_z + s_r  # C^-1 (x - kernel centre)
+        x = C @ white
+        x += centres
+        if self.moment_correction:
+            self._proposal = (centres + C @ s_r, C, G, eps)
+        self._set_costate(a.T, rows, dt if dt > 0.0 else 1.0)
+        if self.weighting == "likelihood":
+            return x, 0.0
+        # log N(x; centre, D) - log q(x): q = N(centre + K r, (D^-1 + H^T (eps R)^-1 H)^-1); W H (x - proposal
+        # mean) = G prior_z = sqrt(eps) v - eps a_u, since (G G^T + eps I) a_u = sqrt(eps) v - G z.
+        e = v - math.sqrt(eps) * a_u
+        correction = 0.5 * (np.einsum("jn,jn->n", prior_z, prior_z) - np.einsum("jn,jn->n", white, white)
+                            + np.einsum("kn,kn->n", e, e) + k * math.log(eps) - log_det)
+        return x, correction
+
+    def _after_weighting(self):
+        """Cloud metric: replace the sampling noise of the weighted mean and covariance by their exact
+        values for the mixture of proposals (``sum_i w_i N(mu_i, Sigma_i)``)."""
+        if self._proposal is None:
+            return
+        mu, C, G, eps = self._proposal
+        self._proposal = None
+        w = self._weights
+        mean = mu @ w
+        d = mu - mean[:, None]
+        k = G.shape[0]
+        # E_w[Sigma_i] = C (I - E_w[G^T (G G^T + eps I)^-1 G]) C^T
+        S = np.einsum("icn,jcn->ijn", G, G)
+        for i in range(k):
+            S[i, i] += eps
+        inverse = solve_spd_logdet(S, np.broadcast_to(np.eye(k)[:, None, :], (k, S.shape[2], k)))[0]
+        M = np.einsum("kjn,kin,n->ji", G, np.einsum("knl,lin->kin", inverse, G), w)
+        spread = C @ (np.eye(C.shape[0]) - M) @ C.T
+        cov = (d * w) @ d.T + spread
+        self._x = match_moments(self._x, w, mean, cov)
+        self._weighted_moments = (mean, cov)
+
+    def _on_resample(self, ancestors):
+        super()._on_resample(ancestors)
+        if self._weighted_moments is not None:
+            uniform = np.full(self.n_particles, 1.0 / self.n_particles)
+            self._x = match_moments(self._x, uniform, *self._weighted_moments)
+        self._weighted_moments = None
 
     def _propose(self, x_pred, y, rows, dt, inverse_factor, z):
         if self.reference == "increment":
@@ -101,7 +266,3 @@ class GeometricProjectionPF(ParticleFilter):
 
     def _after_update(self, y, rows):
         self._previous_y = np.where(rows, y, np.nan)
-
-    def initialize(self, mean, cov):
-        super().initialize(mean, cov)
-        self._previous_y = np.full(self.model.measurement_dim, np.nan)

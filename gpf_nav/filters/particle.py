@@ -104,7 +104,7 @@ class ParticleFilter(Filter):
 
     @property
     def covariance(self):
-        d = self._x - self.mean[:, None]
+        d = self._x - (self._x @ self._weights)[:, None]
         cov = (d * self._weights) @ d.T
         if self._pending_dt > 0.0:
             cov = cov + self.model.process_noise(self._pending_dt)
@@ -318,6 +318,7 @@ class ParticleFilter(Filter):
         if total is None:
             return False
         self.log_likelihood = total  # previous log-weights are normalised
+        self._after_weighting()
         self.ess = resamplers.effective_sample_size(self._weights) / self.n_particles
         if self.ess < self.ess_threshold:
             ancestors = self._resample(self._weights, self.rng)
@@ -327,6 +328,9 @@ class ParticleFilter(Filter):
             self.resampled = True
             self.resample_count += 1
         return True
+
+    def _after_weighting(self) -> None:
+        """Hook run once the new weights are set, before the ESS check and resampling."""
 
     def _on_resample(self, ancestors: np.ndarray) -> None:
         """Per-particle quantities follow their ancestors."""

@@ -1,0 +1,194 @@
+"""Dynamic model compensation: any model augmented with an estimated unmodelled acceleration.
+
+The orbit-determination answer to structural model error. The user's model ``dx = f(x) dt + G dB`` is
+augmented with ``p`` states ``a`` that act as an extra acceleration on its velocity components (or, for a
+model without velocities, as an extra drift on every state) and follow a first-order Gauss-Markov process:
+
+    dx = (f(x, t, u) + B a) dt + G dB,        da = -a / tau dt + sigma sqrt(2 / tau) dW.
+
+``sigma`` is the stationary standard deviation of the unmodelled acceleration and ``tau`` its correlation
+time. Nothing here knows what the error is (a gravity scale, a thrust, drag or a mis-modelled field are
+all "an acceleration the nominal drift does not have"); the filter estimates ``a`` from the measurements.
+
+Over a step, ``a`` enters the base transition through the exact response of a double integrator (position
+``tau (dt - tau (1 - e))``, velocity ``tau (1 - e)`` per unit ``a``, ``e = exp(-dt / tau)``); the process
+noise is the base ``Q(dt)`` plus the exact Gauss-Markov covariance propagated through the same kinematic
+chain (Van Loan's matrix exponential), cached per ``dt``.
+"""
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+from scipy.linalg import expm
+
+from gpf_nav.models.base import StateSpaceModel
+
+
+class ModelErrorCompensation(StateSpaceModel):
+    """``base`` with ``p`` Gauss-Markov unmodelled-acceleration states appended: ``x_aug = [x, a]``.
+
+    Args:
+        base: the nominal model (any :class:`StateSpaceModel`).
+        time_constant: correlation time ``tau`` of the unmodelled acceleration, s.
+        acceleration_std: its stationary standard deviation ``sigma``, state units per s^2 (m/s^2).
+
+    Attributes:
+        compensation_index: indices of the ``a`` states in the augmented state.
+        acceleration_of: index ``(p,)`` of the base component each ``a`` drives (a velocity, or every
+            state when the base declares no velocities).
+    """
+
+    def __init__(self, base: StateSpaceModel, time_constant: float = 600.0,
+                 acceleration_std: float = 1e-2):
+        if not (math.isfinite(time_constant) and time_constant > 0):
+            raise ValueError(f"time_constant must be positive, got {time_constant}")
+        if not (math.isfinite(acceleration_std) and acceleration_std >= 0):
+            raise ValueError(f"acceleration_std must be non-negative, got {acceleration_std}")
+        self.base = base
+        self.time_constant = float(time_constant)
+        self.acceleration_std = float(acceleration_std)
+        n = base.state_dim
+        driven = tuple(base.velocity_index) or tuple(range(n))
+        self.acceleration_of = np.asarray(driven, dtype=int)
+        # the position each driven velocity integrates into (none for a model without positions)
+        pairs = len(base.position_index) == len(base.velocity_index) and len(base.velocity_index) > 0
+        self._integrated_into = np.asarray(base.position_index, dtype=int) if pairs else None
+        p = len(driven)
+        self.state_dim = n + p
+        self.measurement_dim = base.measurement_dim
+        self.angular = base.angular
+        self.position_index = tuple(base.position_index)
+        self.velocity_index = tuple(base.velocity_index)
+        self.measured_state_index = (tuple(base.measured_state_index)
+                                     if base.measured_state_index is not None else tuple(range(n)))
+        self.orthogonal_jacobian_rows = base.orthogonal_jacobian_rows
+        self.compensation_index = tuple(range(n, n + p))
+        self._n, self._p = n, p
+        self._A = self._linear_chain()
+
+    # --- the linear part driven by a ------------------------------------------------------------------
+    def _linear_chain(self) -> np.ndarray:
+        """``(n+p, n+p)`` matrix of the kinematic chain ``a -> velocity -> position`` and ``-a / tau``."""
+        n, p = self._n, self._p
+        A = np.zeros((n + p, n + p))
+        A[self.acceleration_of, n + np.arange(p)] = 1.0
+        if self._integrated_into is not None:
+            A[self._integrated_into, self.acceleration_of] = 1.0
+        A[n:, n:] = -np.eye(p) / self.time_constant
+        return A
+
+    def _coupling(self, dt: float) -> tuple[np.ndarray, float]:
+        """``(G (n, p), decay)``: the change of ``x`` per unit ``a`` over ``dt``, and ``exp(-dt/tau)``."""
+        return _coupling(self._n, self._p, self.acceleration_of.tobytes(),
+                         None if self._integrated_into is None else self._integrated_into.tobytes(),
+                         self.time_constant, float(dt))
+
+    def _split(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return x[:, :self._n], x[:, self._n:]
+
+    # --- StateSpaceModel -------------------------------------------------------------------------------
+    def drift(self, x, t=0.0, u=None):
+        xb, a = self._split(x)
+        out = np.empty_like(x, dtype=float)
+        out[:, :self._n] = self.base.drift(xb, t, u)
+        out[:, self.acceleration_of] += a
+        out[:, self._n:] = -a / self.time_constant
+        return out
+
+    def transition(self, x, dt, t=0.0, u=None):
+        xb, a = self._split(x)
+        G, decay = self._coupling(dt)
+        out = np.empty((x.shape[0], self.state_dim))
+        out[:, :self._n] = self.base.transition(xb, dt, t, u)
+        out[:, :self._n] += a @ G.T
+        out[:, self._n:] = a * decay
+        return out
+
+    def transition_jacobian(self, x, dt, t=0.0, u=None):
+        xb, _ = self._split(x)
+        G, decay = self._coupling(dt)
+        J = np.zeros((x.shape[0], self.state_dim, self.state_dim))
+        J[:, :self._n, :self._n] = self.base.transition_jacobian(xb, dt, t, u)
+        J[:, :self._n, self._n:] = G
+        J[:, self._n:, self._n:] = decay * np.eye(self._p)
+        return J
+
+    def process_noise(self, dt):
+        Q = np.zeros((self.state_dim, self.state_dim))
+        Q[:self._n, :self._n] = self.base.process_noise(dt)
+        return Q + self._compensation_noise(float(dt))
+
+    def _compensation_noise(self, dt: float) -> np.ndarray:
+        """Covariance ``(n+p, n+p)`` the Gauss-Markov noise accumulates over ``dt`` (Van Loan)."""
+        if self.acceleration_std == 0.0 or dt == 0.0:
+            return np.zeros((self.state_dim, self.state_dim))
+        return _van_loan(self._A.tobytes(), self.state_dim, self._n,
+                         2.0 * self.acceleration_std ** 2 / self.time_constant, abs(dt))
+
+    def measure(self, x):
+        return self.base.measure(x[:, :self._n])
+
+    def measurement_jacobian(self, x):
+        return self._pad(self.base.measurement_jacobian(x[:, :self._n]))
+
+    def measure_and_jacobian(self, x):
+        h, H = self.base.measure_and_jacobian(x[:, :self._n])
+        return h, self._pad(H)
+
+    def _pad(self, H: np.ndarray) -> np.ndarray:
+        """Base Jacobian ``(N, m, n)`` with zero columns for ``a``: ``(N, m, n+p)``."""
+        out = np.zeros((H.shape[1], self.state_dim, H.shape[0]))  # built particle-last, like the models
+        out[:, :self._n] = H.transpose(1, 2, 0)
+        return out.transpose(2, 0, 1)
+
+    def measurement_noise(self):
+        return self.base.measurement_noise()
+
+    def residual(self, y, y_pred):
+        return self.base.residual(y, y_pred)
+
+    def measurement_mean(self, y, weights):
+        return self.base.measurement_mean(y, weights)
+
+    # --- helpers for callers -----------------------------------------------------------------------------
+    def augment_prior(self, mean: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A base prior ``N(mean (n,), cov (n, n))`` extended with ``a ~ N(0, sigma^2 I)``."""
+        mean = np.concatenate([np.asarray(mean, dtype=float).reshape(-1), np.zeros(self._p)])
+        out = np.zeros((self.state_dim, self.state_dim))
+        out[:self._n, :self._n] = cov
+        out[self._n:, self._n:] = self.acceleration_std ** 2 * np.eye(self._p)
+        return mean, out
+
+
+@lru_cache(maxsize=32)
+def _coupling(n: int, p: int, driven: bytes, integrated: bytes | None, tau: float,
+              dt: float) -> tuple[np.ndarray, float]:
+    decay = math.exp(-dt / tau)
+    velocity_gain = tau * (1.0 - decay)  # integral of exp(-s/tau) over dt
+    position_gain = tau * (dt - velocity_gain)  # its integral
+    G = np.zeros((n, p))
+    G[np.frombuffer(driven, dtype=int), np.arange(p)] = velocity_gain
+    if integrated is not None:
+        G[np.frombuffer(integrated, dtype=int), np.arange(p)] = position_gain
+    G.flags.writeable = False
+    return G, decay
+
+
+@lru_cache(maxsize=32)
+def _van_loan(A_bytes: bytes, dim: int, n: int, spectral_density: float, dt: float) -> np.ndarray:
+    """``int_0^dt e^{A s} Qc e^{A^T s} ds`` with ``Qc`` the density on the last ``dim - n`` states."""
+    A = np.frombuffer(A_bytes).reshape(dim, dim)
+    Qc = np.zeros((dim, dim))
+    Qc[n:, n:] = spectral_density * np.eye(dim - n)
+    M = np.zeros((2 * dim, 2 * dim))
+    M[:dim, :dim] = -A
+    M[:dim, dim:] = Qc
+    M[dim:, dim:] = A.T
+    E = expm(M * dt)
+    phi_t = E[dim:, dim:]
+    Q = phi_t.T @ E[:dim, dim:]
+    Q = 0.5 * (Q + Q.T)
+    Q.flags.writeable = False
+    return Q
