@@ -32,35 +32,23 @@ def cholesky_or_none(cov: np.ndarray) -> np.ndarray | None:
 
 def solve_spd(S: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Solve ``S a = b`` for symmetric positive definite ``S`` ``(m, m, N)`` and ``b`` ``(m, N)``."""
-    return solve_spd_logdet(S, b)[0]
-
-
-def solve_spd_logdet(S: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(S^-1 b, log det S)`` for symmetric positive definite ``S`` ``(m, m, N)`` and ``b`` ``(m, N)``
-    or ``(m, N, r)`` (``r`` right-hand sides per matrix); closed form up to ``m = 3``."""
     m = S.shape[0]
-    if m > 3:
-        rhs = b.reshape(m, S.shape[2], -1).transpose(1, 0, 2)
-        a = np.linalg.solve(S.transpose(2, 0, 1), rhs).transpose(1, 0, 2).reshape(b.shape)
-        return a, np.linalg.slogdet(S.transpose(2, 0, 1))[1]
-    extra = (slice(None),) + (None,) * (b.ndim - 2)  # broadcast per-matrix entries over the r columns
     if m == 1:
-        det = S[0, 0]
-        return b / det[extra], np.log(det)
+        return b / S[0]
     if m == 2:
         a, c, d = S[0, 0], S[0, 1], S[1, 1]
-        det = a * d - c * c
-        a, c, d, inv_det = a[extra], c[extra], d[extra], 1.0 / det[extra]
-        return np.stack([(d * b[0] - c * b[1]) * inv_det, (a * b[1] - c * b[0]) * inv_det]), np.log(det)
-    a, bb, c = S[0, 0], S[0, 1], S[0, 2]
-    d, e, f = S[1, 1], S[1, 2], S[2, 2]
-    # cofactors of the symmetric matrix [[a, bb, c], [bb, d, e], [c, e, f]]
-    A = d * f - e * e
-    B = c * e - bb * f
-    C = bb * e - c * d
-    det = a * A + bb * B + c * C
-    D, E, F = a * f - c * c, bb * c - a * e, a * d - bb * bb
-    A, B, C, D, E, F, inv_det = (v[extra] for v in (A, B, C, D, E, F, 1.0 / det))
-    x0, x1, x2 = b[0] * inv_det, b[1] * inv_det, b[2] * inv_det
-    return (np.stack([A * x0 + B * x1 + C * x2, B * x0 + D * x1 + E * x2, C * x0 + E * x1 + F * x2]),
-            np.log(det))
+        inv_det = 1.0 / (a * d - c * c)
+        return np.stack([(d * b[0] - c * b[1]) * inv_det, (a * b[1] - c * b[0]) * inv_det])
+    if m == 3:
+        a, bb, c = S[0, 0], S[0, 1], S[0, 2]
+        d, e, f = S[1, 1], S[1, 2], S[2, 2]
+        # cofactors of the symmetric matrix [[a, bb, c], [bb, d, e], [c, e, f]]
+        A = d * f - e * e
+        B = c * e - bb * f
+        C = bb * e - c * d
+        inv_det = 1.0 / (a * A + bb * B + c * C)
+        x0, x1, x2 = b[0] * inv_det, b[1] * inv_det, b[2] * inv_det
+        return np.stack([A * x0 + B * x1 + C * x2,
+                         B * x0 + (a * f - c * c) * x1 + (bb * c - a * e) * x2,
+                         C * x0 + (bb * c - a * e) * x1 + (a * d - bb * bb) * x2])
+    return np.linalg.solve(S.transpose(2, 0, 1), b.T[..., None])[..., 0].T

@@ -35,7 +35,8 @@ import numpy as np
 from gpf_nav.experiments import metrics
 from gpf_nav.experiments.parallel import default_workers, map_tasks
 from gpf_nav.experiments.runner import (ALIASES, DEFAULT_PARTICLES, EXTRA_FILTERS, FILTERS, GPF_DEFAULT,
-                                        GPF_PRINTED, PARTICLE_FILTERS, RunTask, run_task)
+                                        GPF_NAV, GPF_PRINTED, PARTICLE_FILTERS, RunTask, run_task,
+                                        select_oracle)
 from gpf_nav.scenario import CASES, ScenarioConfig
 
 SCHEMA = "gpf_nav.montecarlo/1"
@@ -73,9 +74,9 @@ def add_common_arguments(parser: argparse.ArgumentParser, runs: int) -> None:
     parser.add_argument("--particles", type=int, default=DEFAULT_PARTICLES,
                         help=f"particles / ensemble members (default {DEFAULT_PARTICLES})")
     parser.add_argument("--filters", default=None,
-                        help="comma-separated short names (default: the seven rows gpf, gpf-printed, "
-                             "gpf-exact, spf, ekf, ukf, enkf); also available: gpf-qmetric = "
-                             + ", ".join(EXTRA_FILTERS))
+                        help="comma-separated short names (default: gpf, ekf-comp, ekf-oracle, "
+                             "ukf-oracle and the paper's seven rows gpf-paper, gpf-printed, gpf-exact, spf, "
+                             "ekf, ukf, enkf); also available: gpf-qmetric = " + ", ".join(EXTRA_FILTERS))
     parser.add_argument("--cases", default="full,partial", help="comma-separated cases (full,partial)")
     parser.add_argument("--divergence-km", type=float, default=1000.0,
                         help="position error counted as divergence (km, default 1000)")
@@ -316,7 +317,7 @@ def campaign(config: ScenarioConfig, cases=("full", "partial"), runs: int = 100,
     tasks = build_tasks(config, cases, runs, seed, tuple(filters), n_particles, divergence_km * 1e3, series)
     results = map_tasks(run_task, tasks, workers=workers, scheduler=scheduler, progress=progress,
                         description="Monte Carlo runs")
-    reference = GPF_DEFAULT if GPF_DEFAULT in filters else None
+    reference = next((f for f in (GPF_NAV, GPF_DEFAULT) if f in filters), None)
     report = {"schema": SCHEMA,
               "settings": {"runs": runs, "seed": seed, "n_particles": n_particles, "filters": list(filters),
                            "reference_filter": reference, "divergence_km": divergence_km,
@@ -329,7 +330,9 @@ def campaign(config: ScenarioConfig, cases=("full", "partial"), runs: int = 100,
     timing = {}
     for case in cases:
         case_results = [r for r in results if r["case"] == case]
+        oracle = select_oracle(case_results, tuple(filters))
         summary = summarise_case(case_results, tuple(filters), reference)
+        summary["oracle_multiplier"] = oracle
         summary["label"] = CASE_NAMES[case]
         report["per_run"][case] = {
             name: {"position_rmse_km": per_run_values(case_results, name, "position_rmse", 1e-3),
@@ -370,7 +373,7 @@ def draw_figures(report: dict, figures: dict, out: Path) -> list[Path]:
     if any(d["ess"] for d in cases.values()):
         paths.append(plots.ess_evolution(times, {c: d["ess"] for c, d in cases.items()}, runs,
                                          report["settings"]["ess_threshold"], out / "ess.png"))
-    degeneracy = {c: {n: p for n, p in d["points"].items() if n in ("SPF", GPF_DEFAULT, GPF_PRINTED)}
+    degeneracy = {c: {n: p for n, p in d["points"].items() if n in ("SPF", GPF_NAV, GPF_DEFAULT, GPF_PRINTED)}
                   for c, d in cases.items()}
     if any(degeneracy.values()):
         paths.append(plots.costate_degeneracy(degeneracy, {c: d["correlations"] for c, d in cases.items()},

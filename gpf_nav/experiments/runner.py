@@ -13,6 +13,7 @@ docs/scenario.md, "Seeds and streams"), which pairs the runs of Case 1 and Case 
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -26,36 +27,90 @@ DEFAULT_PARTICLES = 500
 DEFAULT_DIVERGENCE_BOUND = 1.0e6  # m: a run whose position error ever exceeds 1000 km has diverged
 
 GPF_DEFAULT = "GPF (innovation, likelihood)"
+"""The paper's GPF as its experiments run it (the reference row of Table 1)."""
 GPF_PRINTED = "GPF as printed (increment, likelihood)"
 GPF_EXACT = "GPF exact (innovation, corrected)"
 GPF_QMETRIC = "GPF Q-metric (innovation, corrected, eps=1)"
+GPF_NAV = "GPF navigation (default)"
+"""``GeometricProjectionPF(model)``: cloud metric, exact weights, unmodelled-acceleration compensation."""
+EKF_COMPENSATED = "EKF + compensation"
+"""EKF with the same unmodelled-acceleration compensation and tuning as :data:`GPF_NAV`."""
+PAPER_GPF = {"metric": "euclidean", "weighting": "likelihood", "unmodelled_acceleration_std": 0.0}
+"""Options of the paper's GPF rows on top of :class:`GeometricProjectionPF`'s defaults."""
+
+ORACLE_GRID = tuple(10.0 ** k for k in range(8))
+"""Process-noise variance multipliers searched by the oracle-tuned rows (x1 ... x1e7)."""
+ORACLE_FAMILIES = {"EKF, oracle-tuned Q": "EKF", "UKF, oracle-tuned Q": "UKF"}
+"""Oracle-tuned rows and the filter they tune: per case and swept value, the grid member with the
+lowest mean position RMSE over the runs (it has seen the truth: not a filter a user could run)."""
+
+
+def grid_name(family: str, multiplier: float) -> str:
+    """Name of the member of an oracle family run with ``Q`` times ``multiplier``."""
+    return f"{ORACLE_FAMILIES[family]}, Q x{multiplier:g}"
+
+
+def expand_filters(filters: tuple[str, ...]) -> tuple[str, ...]:
+    """The filters to run: oracle families replaced by their grid members."""
+    out = []
+    for name in filters:
+        out.extend(grid_name(name, m) for m in ORACLE_GRID) if name in ORACLE_FAMILIES else out.append(name)
+    return tuple(dict.fromkeys(out))
+
+
+def select_oracle(results: list[dict], filters: tuple[str, ...]) -> dict:
+    """Add each oracle family of ``filters`` to ``results`` (in place) as a copy of its best grid
+    member (lowest mean position RMSE over these runs); returns ``{family: chosen multiplier}``."""
+    chosen = {}
+    for family in (f for f in filters if f in ORACLE_FAMILIES):
+        def score(m):
+            values = [r["filters"][grid_name(family, m)]["position_rmse"] for r in results]
+            values = [v for v in values if np.isfinite(v)]
+            return np.mean(values) if len(values) == len(results) else np.inf
+        best = min(ORACLE_GRID, key=score)
+        chosen[family] = best
+        for r in results:
+            r["filters"][family] = r["filters"][grid_name(family, best)]
+    return chosen
 
 
 def _make_filter(name: str, model, n_particles: int, seed):
-    """Construct the filter named ``name`` (one of :data:`FILTERS` or :data:`EXTRA_FILTERS`)."""
-    from gpf_nav.filters import BootstrapPF, GeometricProjectionPF
+    """Construct the filter named ``name`` (one of :data:`FILTERS`, :data:`EXTRA_FILTERS` or an oracle
+    grid member)."""
+    from gpf_nav.filters import BootstrapPF, CompensatedEKF, GeometricProjectionPF
 
+    if name == GPF_NAV:
+        return GeometricProjectionPF(model, n_particles, seed=seed)
+    if name == EKF_COMPENSATED:
+        return CompensatedEKF(model, seed=seed)
     if name == GPF_DEFAULT:
-        return GeometricProjectionPF(model, n_particles, reference="innovation", weighting="likelihood",
-                                     seed=seed)
+        return GeometricProjectionPF(model, n_particles, reference="innovation", seed=seed, **PAPER_GPF)
     if name == GPF_PRINTED:
-        return GeometricProjectionPF(model, n_particles, reference="increment", weighting="likelihood",
-                                     seed=seed)
+        return GeometricProjectionPF(model, n_particles, reference="increment", seed=seed, **PAPER_GPF)
     if name == GPF_EXACT:
-        return GeometricProjectionPF(model, n_particles, reference="innovation", weighting="corrected",
-                                     seed=seed)
+        return GeometricProjectionPF(model, n_particles, reference="innovation", seed=seed,
+                                     **{**PAPER_GPF, "weighting": "corrected"})
     if name == GPF_QMETRIC:
         return GeometricProjectionPF(model, n_particles, reference="innovation", weighting="corrected",
-                                     metric="process_noise", regularization=1.0, seed=seed)
+                                     metric="process_noise", regularization=1.0,
+                                     unmodelled_acceleration_std=0.0, seed=seed)
     if name == "SPF":
         return BootstrapPF(model, n_particles, seed=seed, compute_costate=True)
-    if name == "EKF":
-        return _kalman("ExtendedKF")(model, seed=seed)
-    if name == "UKF":
-        return _kalman("UnscentedKF")(model, seed=seed)
+    if name in ("EKF", "UKF") or name.split(",")[0] in ("EKF", "UKF"):
+        return _kalman({"EKF": "ExtendedKF", "UKF": "UnscentedKF"}[name.split(",")[0]])(model, seed=seed)
     if name == "EnKF":
         return _kalman("EnsembleKF")(model, n_particles, seed=seed)
     raise ValueError(f"unknown filter {name!r}; known: {list(FILTERS) + list(EXTRA_FILTERS)}")
+
+
+def filter_model_of(name: str, config: ScenarioConfig):
+    """The model filter ``name`` runs on: the scenario's filter model, with the process-noise density
+    scaled for an oracle grid member (``Q x m``: density times ``sqrt(m)``)."""
+    if ", Q x" in name:
+        multiplier = float(name.rsplit("x", 1)[1])
+        config = dataclasses.replace(config, filter_accel_noise_density=config.filter_accel_noise_density
+                                     * math.sqrt(multiplier))
+    return filter_model(config)
 
 
 def _kalman(cls_name: str):
@@ -69,16 +124,21 @@ def _kalman(cls_name: str):
     return getattr(importlib.import_module(module), cls_name)
 
 
-FILTERS = (GPF_DEFAULT, GPF_PRINTED, GPF_EXACT, "SPF", "EKF", "UKF", "EnKF")
-"""The rows of the Monte Carlo table, in display order (all with N = 500 particles / members)."""
+PAPER_FILTERS = (GPF_DEFAULT, GPF_PRINTED, GPF_EXACT, "SPF", "EKF", "UKF", "EnKF")
+"""The rows of the paper's Table 1, in display order (all with N = 500 particles / members)."""
+FILTERS = (GPF_NAV, EKF_COMPENSATED, "EKF, oracle-tuned Q", "UKF, oracle-tuned Q") + PAPER_FILTERS
+"""The rows of the Monte Carlo table and the sweeps: the navigation-grade GPF, its fair baselines
+(the same compensation; oracle-tuned process noise), then the paper's rows."""
 EXTRA_FILTERS = (GPF_QMETRIC,)
 """Filters that can be asked for with ``--filters`` but are not part of the default campaign."""
-PARTICLE_FILTERS = (GPF_DEFAULT, GPF_PRINTED, GPF_EXACT, GPF_QMETRIC, "SPF")
+PARTICLE_FILTERS = (GPF_NAV, GPF_DEFAULT, GPF_PRINTED, GPF_EXACT, GPF_QMETRIC, "SPF")
 """Filters that have an ESS and a co-state."""
 
 
-ALIASES = {"gpf": GPF_DEFAULT, "gpf-printed": GPF_PRINTED, "gpf-exact": GPF_EXACT, "gpf-qmetric": GPF_QMETRIC,
-           "spf": "SPF", "ekf": "EKF", "ukf": "UKF", "enkf": "EnKF"}
+ALIASES = {"gpf": GPF_NAV, "ekf-comp": EKF_COMPENSATED, "ekf-oracle": "EKF, oracle-tuned Q",
+           "ukf-oracle": "UKF, oracle-tuned Q", "gpf-paper": GPF_DEFAULT, "gpf-printed": GPF_PRINTED,
+           "gpf-exact": GPF_EXACT, "gpf-qmetric": GPF_QMETRIC, "spf": "SPF", "ekf": "EKF", "ukf": "UKF",
+           "enkf": "EnKF"}
 """Short command-line names of the filters (the display names contain commas)."""
 
 
@@ -189,11 +249,10 @@ def run_task(task: RunTask) -> dict:
     """
     scenario_seed, filter_seed = run_seeds(task.seed, task.run)
     scenario = generate(task.config, scenario_seed)
-    model = filter_model(task.config)
     out = {"index": task.index, "run": task.run, "case": task.config.case, "tag": dict(task.tag),
            "filters": {}}
-    for name in task.filters:
-        flt = _make_filter(name, model, task.n_particles, filter_seed)
+    for name in expand_filters(task.filters):
+        flt = _make_filter(name, filter_model_of(name, task.config), task.n_particles, filter_seed)
         summary = run_filter(flt, scenario, task.divergence_bound)
         if not task.series:
             del summary["series"]

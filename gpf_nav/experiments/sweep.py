@@ -27,9 +27,12 @@ from gpf_nav.experiments.montecarlo import (add_common_arguments, base_config, g
                                             parse_filters,
                                             per_run_values, run_metadata, write_json)
 from gpf_nav.experiments.parallel import map_tasks
-from gpf_nav.experiments.runner import RunTask, run_task
+from gpf_nav.experiments.runner import PARTICLE_FILTERS, RunTask, run_task, select_oracle
 
-SCHEMA = "gpf_nav.sweep/1"
+SCHEMA = "gpf_nav.sweep/2"
+COLUMNS = {"position_rmse_km": ("position_rmse", 1e-3), "velocity_rmse_mps": ("velocity_rmse", 1.0),
+           "nees": ("nees", 1.0), "ess": ("ess", 1.0)}
+"""Per-point statistics: JSON key -> (run summary key, scale)."""
 PARAMETERS = {
     "mismatch": ("epsilon", (0.0, 0.02, 0.05, 0.09, 0.14, 0.2),
                  "gravity mismatch epsilon (truth mu(1+epsilon), filters mu)"),
@@ -61,14 +64,19 @@ def sweep(param: str, values, config, cases, runs: int, seed: int, filters, n_pa
                            "base_config": config.to_dict()},
               "cases": {}}
     for case in cases:
-        entry = {"filters": {name: {"position_rmse_km": [], "velocity_rmse_mps": []} for name in filters},
-                 "failures": {name: [] for name in filters}}
+        entry = {"filters": {name: {key: [] for key in COLUMNS} for name in filters},
+                 "failures": {name: [] for name in filters}, "oracle_multiplier": {}}
         for value in values:
             chunk = [r for r in results if r["case"] == case and r["tag"]["value"] == value]
+            for family, multiplier in select_oracle(chunk, tuple(filters)).items():
+                entry["oracle_multiplier"].setdefault(family, []).append(multiplier)
             for name in filters:
                 rows = entry["filters"][name]
-                rows["position_rmse_km"].append(metrics.mean_std(per_run_values(chunk, name, "position_rmse", 1e-3)))
-                rows["velocity_rmse_mps"].append(metrics.mean_std(per_run_values(chunk, name, "velocity_rmse")))
+                for key, (summary_key, scale) in COLUMNS.items():
+                    if summary_key == "ess" and name not in PARTICLE_FILTERS:
+                        rows[key].append({"mean": None, "std": None, "n": 0})
+                    else:
+                        rows[key].append(metrics.mean_std(per_run_values(chunk, name, summary_key, scale)))
                 entry["failures"][name].append({
                     "diverged": sum(bool(r["filters"][name]["diverged"]) for r in chunk),
                     "nonfinite": sum(bool(r["filters"][name]["nonfinite"]) for r in chunk)})
@@ -76,22 +84,30 @@ def sweep(param: str, values, config, cases, runs: int, seed: int, filters, n_pa
     return report
 
 
+TABLES = {"position_rmse_km": "position RMSE (km)", "velocity_rmse_mps": "velocity RMSE (m/s)",
+          "nees": "mean NEES (6 states; consistent: 6)"}
+
+
 def markdown(report: dict) -> str:
-    """Markdown table: one row per filter, one column per value, per case."""
-    lines = [f"# Sweep of {report['label']}: position RMSE (km), mean ± std over "
-             f"{report['settings']['runs']} runs", ""]
+    """Markdown tables (position, velocity, NEES): one row per filter, one column per value, per case."""
+    lines = [f"# Sweep of {report['label']}: mean ± std over {report['settings']['runs']} runs", ""]
     for case, entry in report["cases"].items():
-        lines += [f"## case `{case}`", "",
-                  "| Filter | " + " | ".join(f"{v:g}" for v in report["values"]) + " |",
-                  "|---|" + "---|" * len(report["values"])]
-        for name, rows in entry["filters"].items():
-            cells = []
-            for r, f in zip(rows["position_rmse_km"], entry["failures"][name]):
-                cell = "n/a" if r["mean"] is None else f"{r['mean']:.3g} ± {r['std']:.2g}"
-                if f["diverged"] or f["nonfinite"]:
-                    cell += f" ({f['diverged']} div., {f['nonfinite']} NaN)"
-                cells.append(cell)
-            lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        for key, title in TABLES.items():
+            lines += [f"## case `{case}`: {title}", "",
+                      "| Filter | " + " | ".join(f"{v:g}" for v in report["values"]) + " |",
+                      "|---|" + "---|" * len(report["values"])]
+            for name, rows in entry["filters"].items():
+                cells = []
+                for r, f in zip(rows[key], entry["failures"][name]):
+                    cell = "n/a" if r["mean"] is None else f"{r['mean']:.3g} ± {r['std']:.2g}"
+                    if f["diverged"] or f["nonfinite"]:
+                        cell += f" ({f['diverged']} div., {f['nonfinite']} NaN)"
+                    cells.append(cell)
+                lines.append(f"| {name} | " + " | ".join(cells) + " |")
+            lines.append("")
+        for family, multipliers in entry.get("oracle_multiplier", {}).items():
+            lines.append(f"{family}: process-noise variance multiplier chosen per value: "
+                         + ", ".join(f"{m:g}" for m in multipliers) + "  ")
         lines.append("")
     return "\n".join(lines)
 

@@ -36,25 +36,22 @@ import math
 
 import numpy as np
 
+from gpf_nav.filters.compensated import (UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME,
+                                         ModelErrorCompensated)
 from gpf_nav.filters.kernel import match_moments, optimal_bandwidth, shrink
 from gpf_nav.filters.particle import ParticleFilter, gaussian_shift_correction, select_rows
-from gpf_nav.filters.projection import _as_index, cloud_projection, project
-from gpf_nav.linalg import cholesky_or_none, solve_spd_logdet
+from gpf_nav.filters.projection import project
+from gpf_nav.linalg import cholesky_or_none
 from gpf_nav.models.base import StateSpaceModel
-from gpf_nav.models.compensation import ModelErrorCompensation
 
 REFERENCES = ("innovation", "increment")
 METRICS = ("cloud", "euclidean", "process_noise")
 WEIGHTINGS = ("corrected", "likelihood")
 DEFAULT_REGULARIZATION = {"cloud": 1.0, "euclidean": 1e-6, "process_noise": 1e-6}
 """Tikhonov ``eps`` of each metric when none is given (1: the measurement noise itself, for ``cloud``)."""
-UNMODELLED_ACCELERATION_STD = 0.03
-"""Default stationary standard deviation of the unmodelled acceleration (state units / s^2; m/s^2)."""
-UNMODELLED_ACCELERATION_TIME = 300.0
-"""Default correlation time of the unmodelled acceleration, s."""
 
 
-class GeometricProjectionPF(ParticleFilter):
+class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
     """GPF: the SMC loop with the geometric projection proposal.
 
     ``GeometricProjectionPF(model)`` is the navigation-grade configuration (cloud metric, exact weights,
@@ -107,9 +104,7 @@ class GeometricProjectionPF(ParticleFilter):
             raise ValueError(f"regularization must be positive, got {regularization}")
         if kernel_bandwidth is not None and not 0.0 < float(kernel_bandwidth) < 1.0:
             raise ValueError(f"kernel_bandwidth must lie in (0, 1), got {kernel_bandwidth}")
-        self.nominal_model = model
-        if float(unmodelled_acceleration_std) > 0.0:
-            model = ModelErrorCompensation(model, unmodelled_acceleration_time, unmodelled_acceleration_std)
+        model = self._compensate(model, unmodelled_acceleration_std, unmodelled_acceleration_time)
         super().__init__(model, n_particles, resampling, ess_threshold, seed, collapse_steps)
         self.reference = reference
         self.weighting = weighting
@@ -123,46 +118,7 @@ class GeometricProjectionPF(ParticleFilter):
         self._weighted_moments = None
         self.moment_correction = True
 
-    # --- the user's state and the compensation ----------------------------------------------------------
-    @property
-    def compensated(self) -> bool:
-        """True when the filter estimates an unmodelled acceleration."""
-        return self.model is not self.nominal_model
-
-    @property
-    def mean(self):
-        return super().mean[:self.nominal_model.state_dim]
-
-    @property
-    def covariance(self):
-        n = self.nominal_model.state_dim
-        return self.augmented_covariance[:n, :n]
-
-    @property
-    def augmented_mean(self) -> np.ndarray:
-        """Mean ``(n + p,)`` of the filter's whole state (the user's state, then the compensation)."""
-        return super().mean
-
-    @property
-    def augmented_covariance(self) -> np.ndarray:
-        """Covariance ``(n + p, n + p)`` of the filter's whole state."""
-        return super().covariance
-
-    @property
-    def unmodelled_acceleration(self) -> np.ndarray:
-        """Estimated unmodelled acceleration ``(p,)`` (empty without compensation)."""
-        return self.augmented_mean[self.nominal_model.state_dim:]
-
-    @property
-    def unmodelled_acceleration_covariance(self) -> np.ndarray:
-        """Its covariance ``(p, p)``."""
-        n = self.nominal_model.state_dim
-        return self.augmented_covariance[n:, n:]
-
     def initialize(self, mean, cov):
-        mean = np.asarray(mean, dtype=float).reshape(-1)
-        if self.compensated and mean.shape == (self.nominal_model.state_dim,):
-            mean, cov = self.model.augment_prior(mean, np.asarray(cov, dtype=float))
         super().initialize(mean, cov)
         self._previous_y = np.full(self.model.measurement_dim, np.nan)
 
@@ -172,6 +128,13 @@ class GeometricProjectionPF(ParticleFilter):
         self._input = u
 
     def _sample(self, x_pred, y, rows, dt):
+        """Cloud metric: each particle's innovation projected with the gain of the kernel-smoothed
+        prediction, linearised once at the cloud's mean, and a draw of the resulting Gaussian proposal.
+
+        In whitened coordinates (``x = centre + C w``, ``D = C C^T``; ``W R W^T = I``; ``G = W H C``;
+        ``S = G G^T + eps I``): ``w = z + G^T S^-1 (W r + sqrt(eps) v - G z)`` with ``z``, ``v`` standard
+        normal is an exact draw of ``q = N(centre + K r, (I - K H) D)``, ``K = C G^T S^-1 W``.
+        """
         if self.metric != "cloud" or not rows.any():
             return super()._sample(x_pred, y, rows, dt)
         centres, D = shrink(x_pred, self._weights, self.kernel_bandwidth)
@@ -181,57 +144,54 @@ class GeometricProjectionPF(ParticleFilter):
         if C is None:  # a collapsed cloud on a noise-free model: nothing to project with
             self._set_costate(None, rows, dt)
             return super()._sample(x_pred, y, rows, dt)
-        n, k = self.model.state_dim, int(np.count_nonzero(rows))
+        n, k, eps = self.model.state_dim, int(np.count_nonzero(rows)), self.regularization
+        H = self.model.measurement_jacobian((centres @ self._weights)[None])[0][rows]  # (k, n)
+        r = self.model.residual(y, self.model.measure(centres.T))
+        r = r[:, rows] if k < rows.size else r  # (N, k)
+        W = self._whitener(rows)
+        if W.ndim == 1:
+            G, wr = (H * W[:, None]) @ C, r.T * W[:, None]
+        else:
+            G, wr = W @ H @ C, W @ r.T
+        S = G @ G.T
+        S[np.diag_indices(k)] += eps
+        L = np.linalg.cholesky(S)
         z = self.rng.standard_normal((n, self.n_particles))
         v = self.rng.standard_normal((k, self.n_particles))
-        H, r = self._innovation(centres.T, y, rows)
-        W = self._whitener(rows)
-        columns = _as_index(tuple(range(n)) if self.model.measured_state_index is None
-                            else tuple(self.model.measured_state_index))
-        Ht = H.transpose(1, 2, 0)[:, columns]  # (k, c, N): the columns h depends on
-        if W.ndim == 1:
-            Hw, wr = Ht * W[:, None, None], r.T * W[:, None]
-        else:
-            Hw, wr = np.einsum("ij,jcn->icn", W, Ht), W @ r.T
-        G = np.einsum("kcn,cj->kjn", Hw, C[columns])  # W H C, (k, n, N)
-        eps = self.regularization
         perturbation = math.sqrt(eps) * v
-        perturbation -= np.einsum("kjn,jn->kn", G, z)
-        a, a_u, s_u, s_r, log_det = cloud_projection(G, wr, perturbation, eps)
-        prior_z = z + s_u  # C^-1 (x - proposal mean)
-        white = prior_z + s_r  # C^-1 (x - kernel centre)
-        x = C @ white
-        x += centres
+        perturbation -= G @ z
+        a = np.linalg.solve(S, np.concatenate((wr, perturbation), axis=1))  # (k, 2N)
+        a_r, a_u = a[:, :self.n_particles], a[:, self.n_particles:]
+        mean_shift = G.T @ a_r  # C^-1 (proposal mean - centre)
+        prior_z = z + G.T @ a_u  # C^-1 (x - proposal mean)
+        proposal_means = C @ mean_shift
+        proposal_means += centres
+        x = C @ prior_z
+        x += proposal_means
+        self._set_costate(a_r.T, rows, dt if dt > 0.0 else 1.0)
         if self.moment_correction:
-            self._proposal = (centres + C @ s_r, C, G, eps)
-        self._set_costate(a.T, rows, dt if dt > 0.0 else 1.0)
+            spread = C @ (np.eye(n) - G.T @ np.linalg.solve(S, G)) @ C.T  # (I - K H) D
+            self._proposal = (proposal_means, spread)
         if self.weighting == "likelihood":
             return x, 0.0
-        # log N(x; centre, D) - log q(x): q = N(centre + K r, (D^-1 + H^T (eps R)^-1 H)^-1); W H (x - proposal
-        # mean) = G prior_z = sqrt(eps) v - eps a_u, since (G G^T + eps I) a_u = sqrt(eps) v - G z.
+        # log N(x; centre, D) - log q(x); W H (x - proposal mean) = G prior_z = sqrt(eps) v - eps a_u
+        white = prior_z + mean_shift
         e = v - math.sqrt(eps) * a_u
+        constant = k * math.log(eps) - 2.0 * np.log(np.diag(L)).sum()
         correction = 0.5 * (np.einsum("jn,jn->n", prior_z, prior_z) - np.einsum("jn,jn->n", white, white)
-                            + np.einsum("kn,kn->n", e, e) + k * math.log(eps) - log_det)
+                            + np.einsum("kn,kn->n", e, e) + constant)
         return x, correction
 
     def _after_weighting(self):
         """Cloud metric: replace the sampling noise of the weighted mean and covariance by their exact
-        values for the mixture of proposals (``sum_i w_i N(mu_i, Sigma_i)``)."""
+        values for the mixture of proposals ``sum_i w_i N(mu_i, Sigma)``."""
         if self._proposal is None:
             return
-        mu, C, G, eps = self._proposal
+        mu, spread = self._proposal
         self._proposal = None
         w = self._weights
         mean = mu @ w
         d = mu - mean[:, None]
-        k = G.shape[0]
-        # E_w[Sigma_i] = C (I - E_w[G^T (G G^T + eps I)^-1 G]) C^T
-        S = np.einsum("icn,jcn->ijn", G, G)
-        for i in range(k):
-            S[i, i] += eps
-        inverse = solve_spd_logdet(S, np.broadcast_to(np.eye(k)[:, None, :], (k, S.shape[2], k)))[0]
-        M = np.einsum("kjn,kin,n->ji", G, np.einsum("knl,lin->kin", inverse, G), w)
-        spread = C @ (np.eye(C.shape[0]) - M) @ C.T
         cov = (d * w) @ d.T + spread
         self._x = match_moments(self._x, w, mean, cov)
         self._weighted_moments = (mean, cov)

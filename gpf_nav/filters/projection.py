@@ -23,7 +23,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from gpf_nav.linalg import solve_spd, solve_spd_logdet
+from gpf_nav.linalg import solve_spd
 
 
 def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float,
@@ -110,29 +110,3 @@ def _as_index(columns: tuple[int, ...]) -> slice | list[int]:
         return slice(columns[0], columns[-1] + 1)
     return columns
 
-
-def cloud_projection(G: np.ndarray, whitened_innovation: np.ndarray, whitened_perturbation: np.ndarray,
-                     regularization: float) -> tuple[np.ndarray, ...]:
-    """The projection in the metric ``D = C C^T`` of the predicted cloud, in whitened coordinates.
-
-    With ``G = W H C`` per particle the gain of the projection is ``K = C G^T (G G^T + eps I)^-1 W``
-    (``D H^T (H D H^T + eps R)^-1``). It is applied to the innovation and to the perturbation that turns
-    the prior draw into a draw of the linearised posterior.
-
-    Args:
-        G: ``W H C`` ``(k, n, N)`` (particle index last).
-        whitened_innovation: ``W r`` ``(k, N)``.
-        whitened_perturbation: ``u`` ``(k, N)``.
-        regularization: ``eps`` > 0.
-
-    Returns:
-        ``a_r = (G G^T + eps I)^-1 W r`` (the co-state increment) and ``a_u = (G G^T + eps I)^-1 u``,
-        both ``(k, N)``; ``G^T a_u`` and ``G^T a_r`` ``(n, N)`` (the shifts are ``C G^T a``); and
-        ``log det(G G^T + eps I)`` ``(N,)``.
-    """
-    S = np.einsum("icn,jcn->ijn", G, G)
-    for i in range(S.shape[0]):
-        S[i, i] += regularization
-    a, log_det = solve_spd_logdet(S, np.stack([whitened_innovation, whitened_perturbation], axis=2))
-    s = np.einsum("kjn,knr->rjn", G, a)
-    return a[:, :, 0], a[:, :, 1], s[1], s[0], log_det

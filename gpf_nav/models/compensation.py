@@ -67,6 +67,7 @@ class ModelErrorCompensation(StateSpaceModel):
         self.compensation_index = tuple(range(n, n + p))
         self._n, self._p = n, p
         self._A = self._linear_chain()
+        self._noise_cache: tuple[float, np.ndarray | None] = (math.nan, None)
 
     # --- the linear part driven by a ------------------------------------------------------------------
     def _linear_chain(self) -> np.ndarray:
@@ -102,8 +103,11 @@ class ModelErrorCompensation(StateSpaceModel):
         G, decay = self._coupling(dt)
         out = np.empty((x.shape[0], self.state_dim))
         out[:, :self._n] = self.base.transition(xb, dt, t, u)
-        out[:, :self._n] += a @ G.T
-        out[:, self._n:] = a * decay
+        # G has one velocity (and one position) entry per column: add them without a matrix product
+        out[:, self.acceleration_of] += a * G[self.acceleration_of[0], 0]
+        if self._integrated_into is not None:
+            out[:, self._integrated_into] += a * G[self._integrated_into[0], 0]
+        np.multiply(a, decay, out=out[:, self._n:])
         return out
 
     def transition_jacobian(self, x, dt, t=0.0, u=None):
@@ -116,9 +120,16 @@ class ModelErrorCompensation(StateSpaceModel):
         return J
 
     def process_noise(self, dt):
-        Q = np.zeros((self.state_dim, self.state_dim))
-        Q[:self._n, :self._n] = self.base.process_noise(dt)
-        return Q + self._compensation_noise(float(dt))
+        """Base ``Q(dt)`` plus the Gauss-Markov part; cached for the last ``dt`` (the base model's noise
+        is taken as fixed, as the filters' own noise caches do)."""
+        dt = float(dt)
+        if self._noise_cache[0] != dt:
+            Q = np.zeros((self.state_dim, self.state_dim))
+            Q[:self._n, :self._n] = self.base.process_noise(dt)
+            Q += self._compensation_noise(dt)
+            Q.flags.writeable = False
+            self._noise_cache = (dt, Q)
+        return self._noise_cache[1]
 
     def _compensation_noise(self, dt: float) -> np.ndarray:
         """Covariance ``(n+p, n+p)`` the Gauss-Markov noise accumulates over ``dt`` (Van Loan)."""
