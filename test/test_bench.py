@@ -13,14 +13,16 @@ def test_bench_reports_every_filter_and_the_ratio_of_the_same_run(capsys):
     assert cli.main(["bench", "--json", "--particles", "200", "--repeats", "1"]) == 0
     report = json.loads(capsys.readouterr().out)
     names = [(r["filter"], r["particles"]) for r in report["results"]]
-    assert names == [("GPF", 200), ("SPF", 200), ("EKF", None), ("UKF", None), ("EnKF", 500)]
+    assert names == [("GPF", 200), ("GPF-paper", 200), ("SPF", 200), ("EKF", None), ("UKF", None),
+                     ("EnKF", 500)]
     times = {name: r["us_per_step"] for name, r in zip(names, report["results"])}
     assert all(np.isfinite(t) and t > 0 for t in times.values())
     assert report["gpf_over_spf"]["200"] == pytest.approx(times[("GPF", 200)] / times[("SPF", 200)])
+    assert report["gpf_over_paper_gpf"]["200"] == pytest.approx(times[("GPF", 200)] / times[("GPF-paper", 200)])
     expected = "retain_freed_memory" if allocator.retained else "default"
     assert report["machine"]["allocator"] == expected
     text = bench.format_table(report)
-    assert "GPF/SPF: N=200:" in text and f"allocator: {expected}" in text
+    assert "GPF/SPF: N=200:" in text and "GPF/GPF-paper: N=200:" in text and f"allocator: {expected}" in text
 
 
 @pytest.mark.skipif(platform.system() != "Linux" or platform.libc_ver()[0] != "glibc", reason="glibc only")

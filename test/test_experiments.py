@@ -50,7 +50,9 @@ def test_montecarlo_smoke_json_schema_and_finite_numbers(smoke):
             # NEES is finite unless the filter's covariance was never positive definite (then it is null)
             assert _finite(row["nees"]) or (row["nees"]["mean"] is None and row["nees_defined"]["mean"] == 0)
             assert data["failures"][name]["nonfinite"] == 0
-        assert set(data["wilcoxon"]) == set(runner.FILTERS) - {runner.GPF_DEFAULT}
+        assert set(data["wilcoxon"]) == set(runner.FILTERS) - {runner.GPF_NAV}
+        assert set(data["oracle_multiplier"]) == set(runner.ORACLE_FAMILIES)
+        assert all(m in runner.ORACLE_GRID for m in data["oracle_multiplier"].values())
         for p in data["wilcoxon"].values():
             assert p is None or 0.0 <= p <= 1.0
         band = data["nees_band"]
@@ -137,9 +139,10 @@ def test_sweep_smoke(tmp_path):
     report = json.loads((tmp_path / "sweep_mismatch.json").read_text())
     assert report["values"] == [0.0, 0.2] and report["field"] == "epsilon"
     for case in ("full", "partial"):
-        for name in ("GPF (innovation, likelihood)", "EKF"):
-            rows = report["cases"][case]["filters"][name]["position_rmse_km"]
-            assert len(rows) == 2 and all(_finite(r) for r in rows)
+        for name in (runner.GPF_NAV, "EKF"):
+            for key in ("position_rmse_km", "velocity_rmse_mps", "nees"):
+                rows = report["cases"][case]["filters"][name][key]
+                assert len(rows) == 2 and all(_finite(r) for r in rows)
     if pytest.importorskip("matplotlib"):
         assert (tmp_path / "sweep_mismatch.png").stat().st_size > 10_000
 
@@ -147,3 +150,20 @@ def test_sweep_smoke(tmp_path):
 def test_cli_rejects_unknown_filter(tmp_path):
     with pytest.raises(SystemExit):
         montecarlo.main(["--runs", "1", "--filters", "KF9000", "--out", str(tmp_path)] + SHORT)
+
+
+def test_oracle_row_is_the_grid_member_with_the_lowest_mean_position_rmse():
+    family = "EKF, oracle-tuned Q"
+    results = [{"filters": {runner.grid_name(family, m): {"position_rmse": abs(np.log10(m) - 3) + run}
+                            for m in runner.ORACLE_GRID}} for run in range(3)]
+    assert runner.select_oracle(results, (family, "EKF")) == {family: 1e3}
+    assert all(r["filters"][family] is r["filters"][runner.grid_name(family, 1e3)] for r in results)
+    assert runner.expand_filters((family, "EKF")) == tuple(runner.grid_name(family, m)
+                                                           for m in runner.ORACLE_GRID) + ("EKF",)
+
+
+def test_grid_member_runs_on_the_scaled_process_noise():
+    config = ScenarioConfig()
+    base = runner.filter_model_of("EKF", config)
+    scaled = runner.filter_model_of(runner.grid_name("EKF, oracle-tuned Q", 1e4), config)
+    np.testing.assert_allclose(scaled.process_noise(2.0), 1e4 * base.process_noise(2.0))

@@ -28,11 +28,15 @@ def final_errors(cls, n_particles, seeds, **options):
     return np.sqrt(np.mean(np.square(mean_err))), np.sqrt(np.mean(np.square(cov_err)))
 
 
-EXACT_GPF = {"weighting": "corrected", "metric": "process_noise", "regularization": 1.0}
+EXACT_GPF = {"weighting": "corrected", "metric": "process_noise", "regularization": 1.0,
+             "unmodelled_acceleration_std": 0.0}
+PAPER_GPF = {"metric": "euclidean", "weighting": "likelihood", "unmodelled_acceleration_std": 0.0}
+NO_COMPENSATION = {"unmodelled_acceleration_std": 0.0}
 
 
 @pytest.mark.parametrize("cls,options", [
     (BootstrapPF, {}),
+    (GeometricProjectionPF, NO_COMPENSATION),  # the default configuration (cloud metric)
     (GeometricProjectionPF, EXACT_GPF),
     (GeometricProjectionPF, {**EXACT_GPF, "reference": "increment"}),
 ])
@@ -48,7 +52,7 @@ def test_posterior_converges_to_kalman(cls, options):
 
 def test_likelihood_weighting_is_biased_but_corrected_is_not():
     """The paper's weighting (likelihood only) does not target the posterior; the corrected one does."""
-    biased_mean, biased_cov = final_errors(GeometricProjectionPF, 8000, range(4), weighting="likelihood")
+    biased_mean, biased_cov = final_errors(GeometricProjectionPF, 8000, range(4), **PAPER_GPF)
     exact_mean, exact_cov = final_errors(GeometricProjectionPF, 8000, range(4), **EXACT_GPF)
     assert biased_mean > 3 * exact_mean and biased_cov > 3 * exact_cov
 
@@ -56,7 +60,7 @@ def test_likelihood_weighting_is_biased_but_corrected_is_not():
 def test_euclidean_corrected_weights_are_exact_but_degenerate():
     """The full Euclidean projection with exact weights: unbiased in principle, but its weights
     collapse (position shifted without velocity), so it is far from the posterior at moderate N."""
-    euclid = final_errors(GeometricProjectionPF, 2000, range(4), weighting="corrected")
+    euclid = final_errors(GeometricProjectionPF, 2000, range(4), **{**PAPER_GPF, "weighting": "corrected"})
     metric = final_errors(GeometricProjectionPF, 2000, range(4), **EXACT_GPF)
     assert euclid[0] > 3 * metric[0]
 
@@ -125,9 +129,9 @@ def test_gpf_tracks_lunar_truth():
 
 
 @pytest.mark.parametrize("cls,options", [(BootstrapPF, {}), (GeometricProjectionPF, {}),
-                                         (GeometricProjectionPF, {"weighting": "corrected"}),
+                                         (GeometricProjectionPF, PAPER_GPF),
                                          (GeometricProjectionPF, EXACT_GPF),
-                                         (GeometricProjectionPF, {"reference": "increment"})])
+                                         (GeometricProjectionPF, {**PAPER_GPF, "reference": "increment"})])
 def test_same_seed_is_bit_identical(cls, options):
     outputs = []
     for _ in range(2):

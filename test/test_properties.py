@@ -11,10 +11,13 @@ from gpf_nav.models import MOON_RADIUS, MU_MOON, LinearGaussianModel, LunarDesce
 
 FILTERS = {
     "gpf": lambda model, seed: GeometricProjectionPF(model, 64, seed=seed),
+    "gpf-paper": lambda model, seed: GeometricProjectionPF(model, 64, metric="euclidean", weighting="likelihood",
+                                                           unmodelled_acceleration_std=0.0, seed=seed),
     "gpf-exact": lambda model, seed: GeometricProjectionPF(model, 64, weighting="corrected",
                                                            metric="process_noise", regularization=1.0,
                                                            seed=seed),
-    "gpf-increment": lambda model, seed: GeometricProjectionPF(model, 64, reference="increment", seed=seed),
+    "gpf-increment": lambda model, seed: GeometricProjectionPF(model, 64, reference="increment",
+                                                               metric="euclidean", seed=seed),
     "spf": lambda model, seed: BootstrapPF(model, 64, seed=seed, compute_costate=True, collapse_steps=3),
     "ekf": lambda model, seed: ExtendedKF(model, seed=seed),
     "ukf": lambda model, seed: UnscentedKF(model, seed=seed),

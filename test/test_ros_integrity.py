@@ -67,7 +67,8 @@ def test_engine_feeds_holds_and_resets_the_monitor():
     assert report.level == "FAULT" and report.alarm is None and report.fault_updates == 1
     level, message, values = diag.filter_status(eng, _stamp(s, n_clean), diag.Thresholds(costate_warn=1e12), "gpf")
     kv = dict(values)
-    assert level == diag.ERROR and message.startswith("integrity FAULT: co-state mean T^2")
+    # (the default GPF's weights also collapse on a 10-sigma range outlier: an ESS WARN may come first)
+    assert level == diag.ERROR and "integrity FAULT: co-state mean T^2" in message
     assert "re-initialised" not in message
     assert kv["integrity level"] == "FAULT" and kv["integrity ready"] == "true"
     assert float(kv["integrity statistic"]) > float(kv["integrity threshold"]) > 0
@@ -117,7 +118,7 @@ def test_engine_latches_with_a_negative_hold_and_masks_the_increment_reference()
 
     # increment reference: a component not measured at the previous update has no co-state
     inc = EstimatorEngine(lambda: make_filter("gpf", filter_model(CLEAN), n_particles=100, seed=1,
-                                              reference="increment"), filter_model(CLEAN), eng.config, clock)
+                                              reference="increment", metric="euclidean"), filter_model(CLEAN), eng.config, clock)
     class _NoMask:  # a filter without costate_measured: the engine's own rule
         def __init__(self, inner):
             self.inner = inner
@@ -128,7 +129,7 @@ def test_engine_latches_with_a_negative_hold_and_masks_the_increment_reference()
             return getattr(self.inner, name)
 
     own = EstimatorEngine(lambda: _NoMask(make_filter("gpf", filter_model(CLEAN), n_particles=100, seed=1,
-                                                      reference="increment")),
+                                                      reference="increment", metric="euclidean")),
                           filter_model(CLEAN), eng.config, clock)
     for engine in (inc, own):
         masks = []

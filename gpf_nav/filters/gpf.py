@@ -193,6 +193,8 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         mean = mu @ w
         d = mu - mean[:, None]
         cov = (d * w) @ d.T + spread
+        if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
+            return  # a runaway proposal: leave the sampled cloud to the non-finite checks
         self._x = match_moments(self._x, w, mean, cov)
         self._weighted_moments = (mean, cov)
 

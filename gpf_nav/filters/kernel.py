@@ -39,6 +39,8 @@ def match_moments(x: np.ndarray, weights: np.ndarray, mean: np.ndarray, cov: np.
     m = x @ weights
     d = x - m[:, None]
     current = (d * weights) @ d.T
+    if not np.all(np.isfinite(current)):
+        return x
     try:
         source = np.linalg.cholesky(0.5 * (current + current.T))
         target = np.linalg.cholesky(0.5 * (cov + cov.T))

@@ -25,6 +25,10 @@ from scipy.linalg import expm
 
 from gpf_nav.models.base import StateSpaceModel
 
+MAX_GAP = 100.0
+"""Longest interval, in correlation times, over which the compensation noise is integrated; a longer
+one gets the noise of this one (the compensation state has long forgotten its value by then)."""
+
 
 class ModelErrorCompensation(StateSpaceModel):
     """``base`` with ``p`` Gauss-Markov unmodelled-acceleration states appended: ``x_aug = [x, a]``.
@@ -135,8 +139,10 @@ class ModelErrorCompensation(StateSpaceModel):
         """Covariance ``(n+p, n+p)`` the Gauss-Markov noise accumulates over ``dt`` (Van Loan)."""
         if self.acceleration_std == 0.0 or dt == 0.0:
             return np.zeros((self.state_dim, self.state_dim))
+        # beyond MAX_GAP correlation times the result is of no use and the doubling loses precision
+        dt = min(abs(dt), MAX_GAP * self.time_constant)
         return _van_loan(self._A.tobytes(), self.state_dim, self._n,
-                         2.0 * self.acceleration_std ** 2 / self.time_constant, abs(dt))
+                         2.0 * self.acceleration_std ** 2 / self.time_constant, dt)
 
     def measure(self, x):
         return self.base.measure(x[:, :self._n])
@@ -189,17 +195,27 @@ def _coupling(n: int, p: int, driven: bytes, integrated: bytes | None, tau: floa
 
 @lru_cache(maxsize=32)
 def _van_loan(A_bytes: bytes, dim: int, n: int, spectral_density: float, dt: float) -> np.ndarray:
-    """``int_0^dt e^{A s} Qc e^{A^T s} ds`` with ``Qc`` the density on the last ``dim - n`` states."""
+    """``int_0^dt e^{A s} Qc e^{A^T s} ds`` with ``Qc`` the density on the last ``dim - n`` states.
+
+    Van Loan's block exponential over a step no longer than ``tau`` (its ``e^{-A^T dt}`` block grows like
+    ``e^{dt / tau}``), then doubled: ``Q(2h) = Phi(h) Q(h) Phi(h)^T + Q(h)``, ``Phi(2h) = Phi(h)^2``.
+    """
     A = np.frombuffer(A_bytes).reshape(dim, dim)
+    tau = -1.0 / A[-1, -1]
+    doublings = max(0, math.ceil(math.log2(dt / tau))) if dt > tau else 0
+    h = dt / 2.0 ** doublings
     Qc = np.zeros((dim, dim))
     Qc[n:, n:] = spectral_density * np.eye(dim - n)
     M = np.zeros((2 * dim, 2 * dim))
     M[:dim, :dim] = -A
     M[:dim, dim:] = Qc
     M[dim:, dim:] = A.T
-    E = expm(M * dt)
-    phi_t = E[dim:, dim:]
-    Q = phi_t.T @ E[:dim, dim:]
+    E = expm(M * h)
+    phi = E[dim:, dim:].T
+    Q = phi @ E[:dim, dim:]
+    for _ in range(doublings):
+        Q = phi @ Q @ phi.T + Q
+        phi = phi @ phi
     Q = 0.5 * (Q + Q.T)
     Q.flags.writeable = False
     return Q

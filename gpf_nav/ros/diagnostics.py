@@ -29,7 +29,7 @@ INTEGRITY_LEVEL = {"OK": OK, "WARN": WARN, "FAULT": ERROR}
 @dataclass
 class Thresholds:
     ess_warn: float = 0.05        # ESS/N below this is WARN
-    costate_warn: float = 1e7     # mean co-state norm (m^2/s, Euclidean metric) above this is WARN
+    costate_warn: float = 50.0    # mean co-state norm (1/s, cloud metric) above this is WARN
     sensor_timeout: float = 10.0  # s without an accepted measurement is WARN
 
 
@@ -37,6 +37,11 @@ def _fmt(value) -> str:
     if isinstance(value, float):
         return f"{value:.6g}"
     return str(value)
+
+
+def _vector(value) -> str:
+    """``"x y z"`` of a vector, or ``n/a``."""
+    return "n/a" if value is None else " ".join(f"{float(v):.6g}" for v in value)
 
 
 def filter_status(engine, now_ns: int | None, thresholds: Thresholds, filter_name: str,
@@ -84,6 +89,8 @@ def filter_status(engine, now_ns: int | None, thresholds: Thresholds, filter_nam
         ("co-state norm", _fmt(stats["costate_norm_mean"]) if "costate_norm_mean" in stats else "n/a"),
         ("co-state norm max", _fmt(stats["costate_norm_max"]) if "costate_norm_max" in stats else "n/a"),
         ("resample count", str(stats.get("resample_count", "n/a"))),
+        ("unmodelled acceleration [m/s^2]", _vector(stats.get("unmodelled_acceleration"))),
+        ("unmodelled acceleration std [m/s^2]", _vector(stats.get("unmodelled_acceleration_std"))),
         ("measurements accepted", str(accepted)),
         ("measurements rejected", str(rejected)),
         ("messages rejected", str(c.total_rejected)),

@@ -446,7 +446,8 @@ class EstimatorEngine:
         return (now_ns - self.last_measurement_ns) * 1e-9
 
     def filter_stats(self) -> dict:
-        """ESS/N and co-state figures of a particle filter (keys absent for other filters)."""
+        """ESS/N and co-state figures of a particle filter, and the estimated unmodelled acceleration
+        ``(p,)`` with its standard deviations of a compensated filter (keys absent otherwise)."""
         f = self.filter
         out = {}
         if not self.initialized:
@@ -457,6 +458,12 @@ class EstimatorEngine:
         if self.has_costate:
             out["costate_norm_mean"] = float(f.costate_norm_mean)
             out["costate_norm_max"] = float(f.costate_norm_max)
+        if getattr(f, "compensated", False):
+            acceleration = np.asarray(f.unmodelled_acceleration, dtype=float)
+            sigma = np.sqrt(np.clip(np.diag(f.unmodelled_acceleration_covariance), 0.0, None))
+            if np.all(np.isfinite(acceleration)) and np.all(np.isfinite(sigma)):
+                out["unmodelled_acceleration"] = acceleration
+                out["unmodelled_acceleration_std"] = sigma
         return out
 
     @property

@@ -164,6 +164,7 @@ class EstimatorNode(Node):
         self.odom_pub = self.create_publisher(Odometry, "odometry/filtered", reliable)
         self.ess_pub = self.create_publisher(Float64, "gpf/ess", reliable)
         self.costate_pub = self.create_publisher(Vector3Stamped, "gpf/costate", reliable)
+        self.acceleration_pub = self.create_publisher(Vector3Stamped, "gpf/unmodelled_acceleration", reliable)
         self.particles_pub = self.create_publisher(PoseArray, "gpf/particles", reliable)
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", reliable)
         self.create_service(Trigger, "~/reset", self._on_reset)
@@ -182,7 +183,9 @@ class EstimatorNode(Node):
         p = self.params
         return dict(n_particles=p["n_particles"], seed=p["seed"], reference=p["reference"],
                     weighting=p["weighting"], metric=p["metric"], regularization=p["regularization"],
-                    collapse_steps=p["collapse_steps"],
+                    unmodelled_acceleration_std=p["unmodelled_acceleration_std"],
+                    unmodelled_acceleration_time=p["unmodelled_acceleration_time"],
+                    kernel_bandwidth=p["kernel_bandwidth"], collapse_steps=p["collapse_steps"],
                     resampling=p["resampling"], ess_threshold=p["ess_threshold"],
                     compute_costate=p["compute_costate"], ukf_alpha=p["ukf_alpha"],
                     ukf_beta=p["ukf_beta"], ukf_kappa=p["ukf_kappa"])
@@ -359,6 +362,9 @@ class EstimatorNode(Node):
         stats = self.engine.filter_stats()
         if "ess" in stats and math.isfinite(stats["ess"]):
             self.ess_pub.publish(Float64(data=stats["ess"]))
+        if "unmodelled_acceleration" in stats:
+            self.acceleration_pub.publish(conv.vector3_stamped(stats["unmodelled_acceleration"], stamp,
+                                                               p["world_frame"]))
         if self.engine.has_costate:
             lam = np.asarray(f.costate_mean, dtype=float)
             if np.all(np.isfinite(lam)):

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 
+from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME
 from gpf_nav.models.lunar import LunarDescentModel
 
 FILTERS = ("gpf", "spf", "ekf", "ukf", "enkf")
@@ -16,34 +17,45 @@ PARTICLE_FILTERS = ("gpf", "spf")
 
 
 def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 0,
-                reference: str = "innovation", weighting: str = "likelihood",
-                metric: str = "euclidean", regularization: float = 1e-6, collapse_steps: int = 0,
+                reference: str = "innovation", weighting: str = "corrected",
+                metric: str = "cloud", regularization: float = 0.0,
+                unmodelled_acceleration_std: float = UNMODELLED_ACCELERATION_STD,
+                unmodelled_acceleration_time: float = UNMODELLED_ACCELERATION_TIME,
+                kernel_bandwidth: float = 0.0, collapse_steps: int = 0,
                 resampling: str = "systematic", ess_threshold: float = 0.5, compute_costate: bool = True,
                 ukf_alpha: float = 1e-3, ukf_beta: float = 2.0, ukf_kappa: float = 0.0):
     """Build the filter called ``name`` (one of :data:`FILTERS`) on ``model``.
 
-    ``seed < 0`` (or None) draws a random seed. Options a filter does not use are ignored (for example
-    ``n_particles`` for the EKF). Raises ValueError naming the offending parameter.
+    ``seed < 0`` (or None) draws a random seed; ``regularization`` and ``kernel_bandwidth`` 0 take the
+    filter's defaults. Options a filter does not use are ignored (for example ``n_particles`` for the
+    EKF). With the defaults, ``make_filter("gpf", model)`` is ``GeometricProjectionPF(model)``. Raises
+    ValueError naming the offending parameter.
     """
     errors = check_filter_options(name, n_particles=n_particles, reference=reference,
                                   weighting=weighting, regularization=regularization,
                                   resampling=resampling, ess_threshold=ess_threshold,
                                   metric=metric, collapse_steps=collapse_steps, ukf_alpha=ukf_alpha,
-                                  ukf_kappa=ukf_kappa, state_dim=model.state_dim)
+                                  ukf_kappa=ukf_kappa, state_dim=model.state_dim,
+                                  unmodelled_acceleration_std=unmodelled_acceleration_std,
+                                  unmodelled_acceleration_time=unmodelled_acceleration_time,
+                                  kernel_bandwidth=kernel_bandwidth)
     if errors:
         raise ValueError("; ".join(errors))
     seed = None if seed is None or int(seed) < 0 else int(seed)
     if name == "gpf":
         from gpf_nav.filters import GeometricProjectionPF
         return GeometricProjectionPF(model, int(n_particles), reference=reference, weighting=weighting,
-                                     metric=metric, regularization=regularization, resampling=resampling,
+                                     metric=metric, regularization=regularization or None,
+                                     unmodelled_acceleration_std=unmodelled_acceleration_std,
+                                     unmodelled_acceleration_time=unmodelled_acceleration_time,
+                                     kernel_bandwidth=kernel_bandwidth or None, resampling=resampling,
                                      ess_threshold=ess_threshold, seed=seed,
                                      collapse_steps=int(collapse_steps))
     if name == "spf":
         from gpf_nav.filters import BootstrapPF
         return BootstrapPF(model, int(n_particles), resampling=resampling, ess_threshold=ess_threshold,
                            seed=seed, compute_costate=bool(compute_costate),
-                           regularization=regularization, collapse_steps=int(collapse_steps))
+                           regularization=regularization or 1e-6, collapse_steps=int(collapse_steps))
     cls = _core_class({"ekf": "ExtendedKF", "ukf": "UnscentedKF", "enkf": "EnsembleKF"}[name])
     if name == "ekf":
         return cls(model, seed=seed)
@@ -70,8 +82,9 @@ def _core_class(class_name: str):
 
 
 def check_filter_options(name, *, n_particles, reference, weighting, regularization, resampling,
-                         ess_threshold, metric="euclidean", collapse_steps=0, ukf_alpha=1e-3,
-                         ukf_kappa=0.0, state_dim=6) -> list[str]:
+                         ess_threshold, metric="cloud", collapse_steps=0, ukf_alpha=1e-3,
+                         ukf_kappa=0.0, state_dim=6, unmodelled_acceleration_std=0.0,
+                         unmodelled_acceleration_time=1.0, kernel_bandwidth=0.0) -> list[str]:
     """Human-readable errors for invalid filter parameters (empty when all are valid)."""
     from gpf_nav import resampling as resamplers
     from gpf_nav.filters.gpf import METRICS, REFERENCES, WEIGHTINGS
@@ -89,8 +102,8 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
         if resampling not in resamplers.SCHEMES:
             errors.append(f"parameter 'resampling' = {resampling!r} must be one of "
                           f"{', '.join(sorted(resamplers.SCHEMES))}")
-        if not (math.isfinite(regularization) and regularization > 0.0):
-            errors.append(f"parameter 'regularization' = {regularization!r} must be positive")
+        if not (math.isfinite(regularization) and regularization >= 0.0):
+            errors.append(f"parameter 'regularization' = {regularization!r} must be >= 0 (0: default)")
         if not isinstance(collapse_steps, (int, np.integer)) or collapse_steps < 0:
             errors.append(f"parameter 'collapse_steps' = {collapse_steps!r} must be an integer >= 0")
     if name == "gpf":
@@ -100,6 +113,16 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
             errors.append(f"parameter 'weighting' = {weighting!r} must be one of {', '.join(WEIGHTINGS)}")
         if metric not in METRICS:
             errors.append(f"parameter 'metric' = {metric!r} must be one of {', '.join(METRICS)}")
+        elif metric == "cloud" and reference == "increment":
+            errors.append("parameter 'reference' = 'increment' needs metric 'euclidean' or 'process_noise'")
+        if not (math.isfinite(unmodelled_acceleration_std) and unmodelled_acceleration_std >= 0.0):
+            errors.append(f"parameter 'unmodelled_acceleration_std' = {unmodelled_acceleration_std!r} "
+                          "must be >= 0 [m/s^2]")
+        if not (math.isfinite(unmodelled_acceleration_time) and unmodelled_acceleration_time > 0.0):
+            errors.append(f"parameter 'unmodelled_acceleration_time' = {unmodelled_acceleration_time!r} "
+                          "must be positive [s]")
+        if not (math.isfinite(kernel_bandwidth) and 0.0 <= kernel_bandwidth < 1.0):
+            errors.append(f"parameter 'kernel_bandwidth' = {kernel_bandwidth!r} must lie in [0, 1) (0: optimal)")
     if name == "ukf":
         if not ukf_alpha > 0.0:
             errors.append(f"parameter 'ukf_alpha' = {ukf_alpha!r} must be positive")
