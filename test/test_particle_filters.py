@@ -168,3 +168,23 @@ def test_lunar_jacobian_rows_are_orthogonal_and_the_fast_projection_agrees():
     full = project(H, r, W, 1e-6, columns=(0, 1, 2), orthogonal_rows=False)
     assert np.allclose(fast[0], full[0], rtol=1e-9, atol=1e-9)
     assert np.allclose(fast[1], full[1], rtol=1e-9, atol=1e-12)
+
+
+def test_default_gpf_gates_an_outlier_but_its_costate_still_shows_it():
+    """A 100-sigma range outlier is left out of the update (counted), the estimate does not jump, and
+    the co-state of the range component still carries it (for the integrity monitor)."""
+    clean = GeometricProjectionPF(LunarDescentModel(), n_particles=300, seed=7)
+    faulty = GeometricProjectionPF(LunarDescentModel(), n_particles=300, seed=7)
+    for f in (clean, faulty):
+        run_lunar(f, steps=30)
+    clean.predict(2.0)
+    faulty.predict(2.0)
+    predicted = clean.particles[:, :6].T @ clean.weights  # the measurement the cloud expects
+    y = LunarDescentModel().measure(predicted[None])[0]
+    clean.update(y)
+    y[0] += 3000.0
+    faulty.update(y)
+    assert faulty.gated == 1 and clean.gated == 0
+    assert np.linalg.norm(faulty.mean[:3] - clean.mean[:3]) < 100.0
+    assert abs(faulty.costate_mean[0]) > 20 * abs(clean.costate_mean[0])
+    assert faulty.costate_measured.all()

@@ -75,9 +75,12 @@ def test_engine_feeds_holds_and_resets_the_monitor():
     assert float(kv["integrity p-value"]) < 1e-3 and "range" in kv["integrity components"]
 
     # the alarm is held monitor_hold s of the steady clock, then the last update's level is reported
-    eng.measurement(_stamp(s, n_clean + 1), s.measurements[n_clean + 1], None)
-    for k in range(n_clean + 2, n_clean + 30):
+    # (clean updates until the instantaneous level has left FAULT: the outlier pulled the default GPF's
+    # state, whose co-state then stays biased for a few tens of updates)
+    for k in range(n_clean + 1, n_clean + 300):
         eng.measurement(_stamp(s, k), s.measurements[k], None)
+        if k > n_clean + 30 and eng.integrity().status.level != "FAULT":
+            break
     report = eng.integrity()
     assert report.status.level != "FAULT" and report.level == "FAULT" and report.alarm is not None
     assert "s ago" in diag.filter_status(eng, _stamp(s, k), diag.Thresholds(costate_warn=1e12), "gpf")[1]

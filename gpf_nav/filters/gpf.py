@@ -47,6 +47,10 @@ from gpf_nav.models.base import StateSpaceModel
 REFERENCES = ("innovation", "increment")
 METRICS = ("cloud", "euclidean", "process_noise")
 WEIGHTINGS = ("corrected", "likelihood")
+OUTLIER_GATE = 6.0
+"""Default innovation gate of the cloud metric, standard deviations."""
+OUTLIER_GATE_LIMIT = 5
+"""Default number of consecutive refusals of a component after which it is used anyway."""
 DEFAULT_REGULARIZATION = {"cloud": 1.0, "euclidean": 1e-6, "process_noise": 1e-6}
 """Tikhonov ``eps`` of each metric when none is given (1: the measurement noise itself, for ``cloud``)."""
 
@@ -77,6 +81,10 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
             per s^2); 0 turns the compensation off.
         unmodelled_acceleration_time: its correlation time, s.
         kernel_bandwidth: ``h`` of the cloud metric's kernel in (0, 1); default the Gaussian-optimal one.
+        outlier_gate: cloud metric: a measured component whose innovation is beyond this many standard
+            deviations is not used (counted in :attr:`gated`; its co-state is still computed, so the
+            integrity monitor sees it); 0 disables the gate.
+        outlier_gate_limit: consecutive refusals of a component after which it is used anyway.
         resampling: resampling scheme name.
         ess_threshold: tau in (0, 1].
         seed: seed of the filter's random generator.
@@ -87,7 +95,8 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
                  weighting: str = "corrected", metric: str = "cloud", regularization: float | None = None,
                  unmodelled_acceleration_std: float = UNMODELLED_ACCELERATION_STD,
                  unmodelled_acceleration_time: float = UNMODELLED_ACCELERATION_TIME,
-                 kernel_bandwidth: float | None = None, resampling: str = "systematic",
+                 kernel_bandwidth: float | None = None, outlier_gate: float = OUTLIER_GATE,
+                 outlier_gate_limit: int = OUTLIER_GATE_LIMIT, resampling: str = "systematic",
                  ess_threshold: float = 0.5, seed: int | np.random.Generator | None = None,
                  collapse_steps: int = 0):
         if reference not in REFERENCES:
@@ -117,6 +126,13 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         self._proposal = None
         self._weighted_moments = None
         self.moment_correction = True
+        if not (outlier_gate >= 0.0 and int(outlier_gate_limit) >= 0):
+            raise ValueError(f"outlier_gate and outlier_gate_limit must be >= 0, got {outlier_gate}, "
+                             f"{outlier_gate_limit}")
+        self.outlier_gate = float(outlier_gate)
+        self.outlier_gate_limit = int(outlier_gate_limit)
+        self.gated = 0
+        self._gate_streak = np.zeros(model.measurement_dim, dtype=int)
 
     def initialize(self, mean, cov):
         super().initialize(mean, cov)
@@ -144,43 +160,80 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         if C is None:  # a collapsed cloud on a noise-free model: nothing to project with
             self._set_costate(None, rows, dt)
             return super()._sample(x_pred, y, rows, dt)
-        n, k, eps = self.model.state_dim, int(np.count_nonzero(rows)), self.regularization
-        H = self.model.measurement_jacobian((centres @ self._weights)[None])[0][rows]  # (k, n)
-        r = self.model.residual(y, self.model.measure(centres.T))
-        r = r[:, rows] if k < rows.size else r  # (N, k)
-        W = self._whitener(rows)
-        if W.ndim == 1:
-            G, wr = (H * W[:, None]) @ C, r.T * W[:, None]
-        else:
-            G, wr = W @ H @ C, W @ r.T
-        S = G @ G.T
-        S[np.diag_indices(k)] += eps
+        n, eps = self.model.state_dim, self.regularization
+        H = self.model.measurement_jacobian((centres @ self._weights)[None])[0]  # (m, n)
+        r = self.model.residual(y, self.model.measure(centres.T))  # (N, m)
+        G, wr, S = self._whitened(H, r, rows, C)
+        a_r = np.linalg.solve(S, wr)  # the co-state of every measured row, outliers included
+        costate = (a_r.T, rows, dt if dt > 0.0 else 1.0)
+        used = self._gate(wr @ self._weights, S, rows)
+        if not used.any():  # every component refused: a prediction
+            x, correction, _ = ParticleFilter._sample(self, x_pred, y, used, dt)
+            self._set_costate(*costate)
+            return x, correction, used
+        self._set_costate(*costate)
+        if not np.array_equal(used, rows):
+            G, wr, S = self._whitened(H, r, used, C)
+            a_r = np.linalg.solve(S, wr)
+        k = int(np.count_nonzero(used))
         L = np.linalg.cholesky(S)
         z = self.rng.standard_normal((n, self.n_particles))
         v = self.rng.standard_normal((k, self.n_particles))
         perturbation = math.sqrt(eps) * v
         perturbation -= G @ z
-        a = np.linalg.solve(S, np.concatenate((wr, perturbation), axis=1))  # (k, 2N)
-        a_r, a_u = a[:, :self.n_particles], a[:, self.n_particles:]
+        a_u = np.linalg.solve(S, perturbation)
         mean_shift = G.T @ a_r  # C^-1 (proposal mean - centre)
         prior_z = z + G.T @ a_u  # C^-1 (x - proposal mean)
         proposal_means = C @ mean_shift
         proposal_means += centres
         x = C @ prior_z
         x += proposal_means
-        self._set_costate(a_r.T, rows, dt if dt > 0.0 else 1.0)
         if self.moment_correction:
             spread = C @ (np.eye(n) - G.T @ np.linalg.solve(S, G)) @ C.T  # (I - K H) D
             self._proposal = (proposal_means, spread)
         if self.weighting == "likelihood":
-            return x, 0.0
+            return x, 0.0, used
         # log N(x; centre, D) - log q(x); W H (x - proposal mean) = G prior_z = sqrt(eps) v - eps a_u
         white = prior_z + mean_shift
         e = v - math.sqrt(eps) * a_u
         constant = k * math.log(eps) - 2.0 * np.log(np.diag(L)).sum()
         correction = 0.5 * (np.einsum("jn,jn->n", prior_z, prior_z) - np.einsum("jn,jn->n", white, white)
                             + np.einsum("kn,kn->n", e, e) + constant)
-        return x, correction
+        return x, correction, used
+
+    def _whitened(self, H: np.ndarray, r: np.ndarray, rows: np.ndarray, C: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(G = W H C (k, n), W r (k, N), S = G G^T + eps I (k, k))`` of the measured ``rows`` from the
+        Jacobian ``H`` ``(m, n)`` and the innovations ``r`` ``(N, m)``."""
+        H, r = H[rows], (r if rows.all() else r[:, rows])
+        W = self._whitener(rows)
+        if W.ndim == 1:
+            G, wr = (H * W[:, None]) @ C, r.T * W[:, None]
+        else:
+            G, wr = W @ H @ C, W @ r.T
+        S = G @ G.T
+        S[np.diag_indices(S.shape[0])] += self.regularization
+        return G, wr, S
+
+    def _gate(self, innovation: np.ndarray, S: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """The measured ``rows`` less the outliers: a component whose cloud-mean innovation (whitened,
+        ``(k,)``) is beyond ``outlier_gate`` standard deviations of ``S`` ``(k, k)`` is left out, unless it
+        has been left out ``outlier_gate_limit`` times in a row (then the filter, not the sensor, is
+        taken to be off, and the component is used until one passes the gate again)."""
+        if not self.outlier_gate:
+            return rows
+        index = np.flatnonzero(rows)
+        outlier = np.abs(innovation) > self.outlier_gate * np.sqrt(np.diag(S))
+        streak = self._gate_streak
+        streak[index[~outlier]] = 0
+        streak[index[outlier]] += 1
+        refused = index[outlier & (streak[index] <= self.outlier_gate_limit)]
+        if refused.size == 0:
+            return rows
+        self.gated += refused.size
+        used = rows.copy()
+        used[refused] = False
+        return used
 
     def _after_weighting(self):
         """Cloud metric: replace the sampling noise of the weighted mean and covariance by their exact

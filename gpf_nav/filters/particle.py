@@ -157,7 +157,7 @@ class ParticleFilter(Filter):
     def update(self, y):
         self._require_initialized()
         y, rows = self._check_measurement(y)
-        x, log_correction = self._sample(self._x, y, rows, self._pending_dt)
+        x, log_correction, rows = self._sample(self._x, y, rows, self._pending_dt)
         self._x = x
         self._pending_dt = 0.0
         increment = log_correction
@@ -226,9 +226,10 @@ class ParticleFilter(Filter):
         return self._noise_cache[1], self._noise_cache[2]
 
     def _sample(self, x_pred: np.ndarray, y: np.ndarray, rows: np.ndarray, dt: float
-                ) -> tuple[np.ndarray, np.ndarray | float]:
+                ) -> tuple[np.ndarray, np.ndarray | float, np.ndarray]:
         """Draw the new particles ``(n, N)`` from the proposal and return them with the log-weight
-        correction ``log p(x | x_prev) - log q(x | x_prev, y)`` (``(N,)`` or 0.0).
+        correction ``log p(x | x_prev) - log q(x | x_prev, y)`` (``(N,)`` or 0.0) and the measured rows
+        the update uses (``rows`` less any the proposal refused as outliers).
 
         ``x_pred`` ``(n, N)`` is the deterministic flow over the pending ``dt``. This default draws the
         process noise ``L z`` and adds the shift of :meth:`_propose`; the result is a new array, so
@@ -246,7 +247,7 @@ class ParticleFilter(Filter):
             x += x_pred
         if shift is not None:
             x += shift
-        return x, log_correction
+        return x, log_correction, rows
 
     def _propose(self, x_pred, y, rows, dt, inverse_factor, z):
         """Proposal hook: ``(shift (n, N) or None, log-weight correction (N,) or 0.0)``.
@@ -357,29 +358,6 @@ class BootstrapPF(ParticleFilter):
         super().__init__(model, n_particles, resampling, ess_threshold, seed, collapse_steps)
         self.compute_costate = bool(compute_costate)
         self.regularization = float(regularization)
-
-    def _sample(self, x_pred: np.ndarray, y: np.ndarray, rows: np.ndarray, dt: float
-                ) -> tuple[np.ndarray, np.ndarray | float]:
-        """Draw the new particles ``(n, N)`` from the proposal and return them with the log-weight
-        correction ``log p(x | x_prev) - log q(x | x_prev, y)`` (``(N,)`` or 0.0).
-
-        ``x_pred`` ``(n, N)`` is the deterministic flow over the pending ``dt``. This default draws the
-        process noise ``L z`` and adds the shift of :meth:`_propose`; the result is a new array, so
-        views handed out as :attr:`particles` keep the predicted state.
-        """
-        factor = inverse_factor = z = None
-        if dt > 0.0:
-            factor, inverse_factor = self._noise_factors(dt)
-            z = self.rng.standard_normal((self.model.state_dim, self.n_particles))
-        shift, log_correction = self._propose(x_pred, y, rows, dt, inverse_factor, z)
-        if z is None:
-            x = x_pred.copy()
-        else:
-            x = factor @ z
-            x += x_pred
-        if shift is not None:
-            x += shift
-        return x, log_correction
 
     def _propose(self, x_pred, y, rows, dt, inverse_factor, z):
         a = None

@@ -89,6 +89,7 @@ def filter_status(engine, now_ns: int | None, thresholds: Thresholds, filter_nam
         ("co-state norm", _fmt(stats["costate_norm_mean"]) if "costate_norm_mean" in stats else "n/a"),
         ("co-state norm max", _fmt(stats["costate_norm_max"]) if "costate_norm_max" in stats else "n/a"),
         ("resample count", str(stats.get("resample_count", "n/a"))),
+        ("outlier components gated", str(stats.get("gated", "n/a"))),
         ("unmodelled acceleration [m/s^2]", _vector(stats.get("unmodelled_acceleration"))),
         ("unmodelled acceleration std [m/s^2]", _vector(stats.get("unmodelled_acceleration_std"))),
         ("measurements accepted", str(accepted)),

@@ -458,6 +458,8 @@ class EstimatorEngine:
         if self.has_costate:
             out["costate_norm_mean"] = float(f.costate_norm_mean)
             out["costate_norm_max"] = float(f.costate_norm_max)
+        if hasattr(f, "gated"):
+            out["gated"] = int(f.gated)
         if getattr(f, "compensated", False):
             acceleration = np.asarray(f.unmodelled_acceleration, dtype=float)
             sigma = np.sqrt(np.clip(np.diag(f.unmodelled_acceleration_covariance), 0.0, None))
