@@ -40,9 +40,10 @@ from gpf_nav.models.base import wrap_angle
 from gpf_nav.models.lunar import MOON_RADIUS, LunarDescentModel
 from gpf_nav.scenario import Scenario, ScenarioConfig, filter_model, generate
 
-VARIANTS = ("GPF", "GPF-Q", "SPF", "SPF-2k")
+VARIANTS = ("GPF", "GPF-paper", "GPF-Q", "SPF", "SPF-2k")
 VARIANT_LABELS = {
-    "GPF": "GPF default (innovation reference, likelihood weights, Euclidean metric), N particles",
+    "GPF": "GPF default (cloud metric, exact weights, unmodelled-acceleration compensation), N particles",
+    "GPF-paper": "the paper's GPF (innovation reference, likelihood weights, Euclidean metric), N particles",
     "GPF-Q": "GPF, process-noise metric, regularization 1, corrected weights, N particles",
     "SPF": "bootstrap PF with the diagnostic co-state, N particles",
     "SPF-2k": "bootstrap PF with the diagnostic co-state, 2000 particles, filter process-noise density "
@@ -59,9 +60,12 @@ def make_filter(variant: str, model, n_particles: int, seed: int):
 
     if variant == "GPF":
         return GeometricProjectionPF(model, n_particles, seed=seed)
+    if variant == "GPF-paper":
+        return GeometricProjectionPF(model, n_particles, metric="euclidean", weighting="likelihood",
+                                     unmodelled_acceleration_std=0.0, seed=seed)
     if variant == "GPF-Q":
         return GeometricProjectionPF(model, n_particles, weighting="corrected", metric="process_noise",
-                                     regularization=1.0, seed=seed)
+                                     regularization=1.0, unmodelled_acceleration_std=0.0, seed=seed)
     if variant in ("SPF", "SPF-2k"):
         return BootstrapPF(model, _TUNED.get(variant, (n_particles,))[0], seed=seed, compute_costate=True)
     raise ValueError(f"unknown variant {variant!r}; known: {VARIANTS}")
@@ -465,7 +469,7 @@ def _pyplot():
     return plt
 
 
-_COLOURS = {"GPF": "#d62728", "GPF-Q": "#e377c2", "SPF": "#1f77b4", "SPF-2k": "#2ca02c"}
+_COLOURS = {"GPF": "#d62728", "GPF-paper": "#ff7f0e", "GPF-Q": "#e377c2", "SPF": "#1f77b4", "SPF-2k": "#2ca02c"}
 
 
 def draw_figures(settings: Settings, runs: list[dict], summary: dict, example: dict, times: np.ndarray,
