@@ -61,6 +61,9 @@ class ScenarioConfig:
         dropout_probability: probability that a whole measurement vector is lost (all NaN).
         thrust: None for a coasting descent, else the magnitude (m/s^2) of a retrograde specific force
             ``-thrust v / |v|`` evaluated at the start of each step and held over it.
+        thrust_known: the filters are given the thrust as the IMU's specific force (default); False
+            hides it from them: an unmodelled retrograde force like drag (a model error other than
+            the gravity scale).
     """
 
     epsilon: float = 0.09
@@ -82,6 +85,7 @@ class ScenarioConfig:
     measurement_noise_scale: float = 1.0
     dropout_probability: float = 0.0
     thrust: float | None = None
+    thrust_known: bool = True
 
     def __post_init__(self):
         if self.case not in CASES:
@@ -133,6 +137,8 @@ def _coerce(default, value):
     """Convert a parsed value to the type of the field whose default is ``default``."""
     if value is None or isinstance(default, str):
         return value
+    if isinstance(default, bool):
+        return bool(value)
     if isinstance(default, tuple):
         return tuple(float(v) for v in value)
     return float(value)
@@ -316,6 +322,8 @@ def _finish(config: ScenarioConfig, times: np.ndarray, truth: np.ndarray, force:
     if config.case == "partial":
         y[:, 1] = np.nan
     y[drop_rng.random(steps) < config.dropout_probability] = np.nan
+    if not config.thrust_known:
+        force = np.zeros_like(force)
     prior_std = np.repeat([config.prior_position_std, config.prior_velocity_std], 3)
     prior_mean = truth[0] + prior_std * prior_rng.standard_normal(6)
     return Scenario(times=times, truth=truth, measurements=y, specific_force=force,
