@@ -1,0 +1,116 @@
+"""Unmodelled-acceleration compensation: the augmented model against its exact linear-Gaussian form, and
+the compensated filters (EKF, default GPF) against the Kalman filter of the augmented model."""
+import numpy as np
+import pytest
+
+from gpf_nav.filters import CompensatedEKF, GeometricProjectionPF
+from gpf_nav.models import LinearGaussianModel, LunarDescentModel
+from gpf_nav.models.compensation import ModelErrorCompensation
+from linear_reference import kalman, simulate
+
+TAU, SIGMA = 50.0, 0.3
+
+
+def constant_velocity():
+    """1-D constant velocity, position measured; declares its position and velocity."""
+    model = LinearGaussianModel(A=[[0.0, 1.0], [0.0, 0.0]], G=[[0.0], [0.1]], C=[[1.0, 0.0]], R=[[1.0]])
+    model.position_index, model.velocity_index = (0,), (1,)
+    return model
+
+
+def augmented_linear(base):
+    """The augmented model written as a linear-Gaussian model: ``[p, v, a]``, ``v' = a``,
+    ``a' = -a / tau + sigma sqrt(2 / tau) w``."""
+    A = np.zeros((3, 3))
+    A[:2, :2] = base.A
+    A[1, 2] = 1.0
+    A[2, 2] = -1.0 / TAU
+    G = np.zeros((3, 2))
+    G[:2, :1] = base.G
+    G[2, 1] = SIGMA * np.sqrt(2.0 / TAU)
+    return LinearGaussianModel(A=A, G=G, C=np.hstack([base.C, [[0.0]]]), R=base.R)
+
+
+# (the reference's matrix exponential over 8 correlation times is accurate to about 1e-6 only)
+@pytest.mark.parametrize("dt, rtol", [(0.1, 1e-12), (2.0, 1e-12), (40.0, 1e-10), (400.0, 1e-5)])
+def test_augmented_transition_and_noise_are_exact(dt, rtol):
+    base = constant_velocity()
+    model = ModelErrorCompensation(base, TAU, SIGMA)
+    F, _, Q = augmented_linear(base).discretise(dt)
+    x = np.random.default_rng(0).normal(size=(5, 3))
+    np.testing.assert_allclose(model.transition(x, dt), x @ F.T, rtol=rtol, atol=1e-12)
+    np.testing.assert_allclose(model.transition_jacobian(x, dt), np.broadcast_to(F, (5, 3, 3)), rtol=rtol,
+                               atol=1e-12)
+    np.testing.assert_allclose(model.process_noise(dt), Q, rtol=max(rtol, 1e-9), atol=1e-12 * np.abs(Q).max())
+    assert model.compensation_index == (2,)
+
+
+def test_model_without_velocities_gets_an_extra_drift_on_every_state():
+    base = LinearGaussianModel(A=[[-0.1]], G=[[1.0]], C=[[1.0]], R=[[1.0]])
+    model = ModelErrorCompensation(base, TAU, SIGMA)
+    assert model.state_dim == 2 and list(model.acceleration_of) == [0]
+    x = np.array([[1.0, 2.0]])
+    dt = 0.5
+    expected = base.transition(x[:, :1], dt)[0, 0] + 2.0 * TAU * (1.0 - np.exp(-dt / TAU))
+    assert model.transition(x, dt)[0, 0] == pytest.approx(expected)
+    assert model.transition(x, dt)[0, 1] == pytest.approx(2.0 * np.exp(-dt / TAU))
+
+
+def test_lunar_compensation_noise_is_finite_for_any_gap():
+    model = ModelErrorCompensation(LunarDescentModel(), 1e4, 0.1)
+    for dt in (1e-6, 2.0, 1e4, 1e7, 1e12):
+        Q = model.process_noise(dt)
+        assert np.all(np.isfinite(Q)) and np.allclose(Q, Q.T)
+        assert np.linalg.eigvalsh(Q / np.abs(Q).max()).min() > -1e-9
+
+
+def _kalman_of_augmented(ys, dt, mean, cov):
+    base = constant_velocity()
+    linear = augmented_linear(base)
+    m = np.concatenate([mean, [0.0]])
+    P = np.zeros((3, 3))
+    P[:2, :2] = cov
+    P[2, 2] = SIGMA ** 2
+    return kalman(linear, m, P, ys, dt)[-1]
+
+
+def test_compensated_ekf_is_the_kalman_filter_of_the_augmented_model():
+    base = constant_velocity()
+    mean, cov = np.array([0.0, 1.0]), np.diag([4.0, 1.0])
+    ys = simulate(augmented_linear(base), np.array([0.0, 1.0, 0.2]), 30, 1.0, seed=4)
+    exact_mean, exact_cov = _kalman_of_augmented(ys, 1.0, mean, cov)
+    f = CompensatedEKF(base, SIGMA, TAU)
+    f.initialize(mean, cov)
+    for y in ys:
+        f.predict(1.0)
+        f.update(y)
+    np.testing.assert_allclose(f.augmented_mean, exact_mean, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(f.augmented_covariance, exact_cov, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(f.mean, exact_mean[:2], rtol=1e-9, atol=1e-9)
+    assert f.unmodelled_acceleration == pytest.approx(exact_mean[2:])
+    assert f.unmodelled_acceleration_covariance == pytest.approx(exact_cov[2:, 2:])
+
+
+def test_default_gpf_converges_to_the_kalman_posterior_of_the_augmented_model():
+    """Default configuration (compensation on): the weighted cloud approaches the exact posterior of
+    the augmented linear-Gaussian model as N grows."""
+    base = constant_velocity()
+    mean, cov = np.array([0.0, 1.0]), np.diag([4.0, 1.0])
+    ys = simulate(augmented_linear(base), np.array([0.0, 1.0, 0.2]), 10, 1.0, seed=5)
+    exact_mean, exact_cov = _kalman_of_augmented(ys, 1.0, mean, cov)
+    sd = np.sqrt(np.diag(exact_cov))
+
+    def error(n):
+        errors = []
+        for seed in range(6):
+            f = GeometricProjectionPF(base, n, seed=seed, unmodelled_acceleration_std=SIGMA,
+                                      unmodelled_acceleration_time=TAU)
+            f.initialize(mean, cov)
+            for y in ys:
+                f.predict(1.0)
+                f.update(y)
+            errors.append(np.abs(f.augmented_mean - exact_mean) / sd)
+        return np.sqrt(np.mean(np.square(errors)))
+
+    small, large = error(300), error(4800)
+    assert large < small / 2.0 and large < 0.05
