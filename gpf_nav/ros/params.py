@@ -192,3 +192,55 @@ def coerce(spec: Spec, value):
         pass
     raise ParameterError(f"parameter '{spec.name}' = {value!r} has the wrong type; expected "
                          f"{type(default).__name__ if default is not None else 'a list of 6 floats'}")
+
+
+IGNORED_OFFLINE = ("use_sim_time",)
+"""Parameters a params file may set for a node that mean nothing without one (accepted, not used)."""
+
+
+def parameters_from_files(specs: list[Spec], node_name: str, params_files=(), assignments=()) -> dict:
+    """``{name: value}`` of ``specs`` without a node: defaults, then each ROS 2 params file in turn (the
+    sections ``/**``, ``node_name`` and ``/node_name``, nested names joined with ``.``), then each
+    ``name:=value`` assignment (value parsed as YAML, as ``--ros-args -p`` does). Values are coerced as
+    :func:`declare` does; an unknown name or a malformed file raises :class:`ParameterError`."""
+    import yaml
+    known = {spec.name: spec for spec in specs}
+    given: dict = {}
+    for path in params_files:
+        try:
+            with open(path) as f:
+                document = yaml.safe_load(f) or {}
+        except (OSError, yaml.YAMLError) as err:
+            raise ParameterError(f"params file {path}: {err}".replace("\n", " ")) from None
+        sections = [document[k] for k in ("/**", node_name, "/" + node_name)
+                    if isinstance(document, dict) and k in document]
+        if not sections:
+            raise ParameterError(f"params file {path} has no section for {node_name} (nor /**)")
+        for section in sections:
+            if not isinstance(section, dict) or not isinstance(section.get("ros__parameters"), dict):
+                raise ParameterError(f"params file {path}: expected '{node_name}: ros__parameters: ...'")
+            given.update(_flatten(section["ros__parameters"]))
+    for text in assignments:
+        name, sep, value = text.partition(":=")
+        if not sep or not name:
+            raise ParameterError(f"parameter assignment {text!r} must read name:=value")
+        try:
+            given[name] = yaml.safe_load(value)
+        except yaml.YAMLError:
+            given[name] = value
+    unknown = sorted(set(given) - set(known) - set(IGNORED_OFFLINE))
+    if unknown:
+        raise ParameterError(f"unknown parameter(s) of {node_name}: {', '.join(unknown)}")
+    return {name: coerce(spec, given[name]) if name in given else
+            (list(spec.default) if isinstance(spec.default, list) else spec.default)
+            for name, spec in known.items()}
+
+
+def _flatten(tree: dict, prefix: str = "") -> dict:
+    out = {}
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            out.update(_flatten(value, f"{prefix}{key}."))
+        else:
+            out[prefix + str(key)] = value
+    return out

@@ -45,6 +45,31 @@ def scenario_from_parameters(p: dict):
     return config, generate(config, p["seed"])
 
 
+EVENT_TOPICS = {"measurement": ("measurements/rae", Vector3Stamped), "truth": ("truth/odometry", Odometry),
+                "imu": ("imu", Imu)}
+"""Event kind of :mod:`gpf_nav.ros.playback` -> (topic, message type); ``/clock`` besides."""
+QOS_DEPTH = 50
+"""Depth of the simulator's reliable publishers (all topics, ``/clock`` too)."""
+
+
+def event_message(event, stamp_ns: int, p: dict) -> tuple[str, object]:
+    """``(topic, message)`` of a playback event stamped ``stamp_ns``, with the frames of parameters ``p``."""
+    if event.kind == "measurement":
+        return "measurements/rae", conv.vector3_stamped(event.data, stamp_ns, p["measurement_frame"])
+    if event.kind == "truth":
+        return "truth/odometry", conv.odometry_msg(np.array(event.data), np.zeros((6, 6)), stamp_ns,
+                                                   p["world_frame"], p["base_frame"])
+    msg = Imu()
+    msg.header.stamp = conv.ns_to_stamp(stamp_ns)
+    msg.header.frame_id = p["imu_frame"]
+    msg.orientation.w = 1.0  # body axes aligned with the world's (exactly known)
+    msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z = event.data
+    var = p["imu_noise_std"] ** 2
+    msg.linear_acceleration_covariance = [var, 0.0, 0.0, 0.0, var, 0.0, 0.0, 0.0, var]
+    msg.angular_velocity_covariance[0] = -1.0  # not provided
+    return "imu", msg
+
+
 def check_simulator_parameters(p: dict) -> list[str]:
     errors = []
     for key in ("imu_rate", "truth_rate", "imu_noise_std", "start_time", "start_delay"):
@@ -96,10 +121,10 @@ class SimulatorNode(Node):
         else:
             self._epoch_ns = Clock(clock_type=ClockType.SYSTEM_TIME).now().nanoseconds
 
-        qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=50)
-        self.rae_pub = self.create_publisher(Vector3Stamped, "measurements/rae", qos)
-        self.imu_pub = self.create_publisher(Imu, "imu", qos)
-        self.truth_pub = self.create_publisher(Odometry, "truth/odometry", qos)
+        qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
+                         depth=QOS_DEPTH)
+        self._publishers_by_topic = {topic: self.create_publisher(msg_type, topic, qos)
+                                     for topic, msg_type in EVENT_TOPICS.values()}
         self.clock_pub = self.create_publisher(ClockMsg, "/clock", qos) if p["publish_clock"] else None
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(1.0 / p["clock_rate"], self._tick, clock=self._steady)
@@ -134,24 +159,8 @@ class SimulatorNode(Node):
             self._end_of_trajectory()
 
     def _emit(self, event) -> None:
-        p = self.params
-        stamp = self.stamp_ns(event.t_ns)
-        if event.kind == "measurement":
-            self.rae_pub.publish(conv.vector3_stamped(event.data, stamp, p["measurement_frame"]))
-        elif event.kind == "truth":
-            state = np.array(event.data)
-            self.truth_pub.publish(conv.odometry_msg(state, np.zeros((6, 6)), stamp, p["world_frame"],
-                                                     p["base_frame"]))
-        else:
-            msg = Imu()
-            msg.header.stamp = conv.ns_to_stamp(stamp)
-            msg.header.frame_id = p["imu_frame"]
-            msg.orientation.w = 1.0  # body axes aligned with the world's (exactly known)
-            msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z = event.data
-            var = p["imu_noise_std"] ** 2
-            msg.linear_acceleration_covariance = [var, 0.0, 0.0, 0.0, var, 0.0, 0.0, 0.0, var]
-            msg.angular_velocity_covariance[0] = -1.0  # not provided
-            self.imu_pub.publish(msg)
+        topic, msg = event_message(event, self.stamp_ns(event.t_ns), self.params)
+        self._publishers_by_topic[topic].publish(msg)
         self.published[event.kind] += 1
 
     def _end_of_trajectory(self) -> None:

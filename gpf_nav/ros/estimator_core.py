@@ -1,0 +1,380 @@
+"""The estimator node's work between a received message and the messages it publishes, without a node.
+
+:class:`EstimatorCore` builds the model, filter and :class:`gpf_nav.ros.engine.EstimatorEngine` from the
+node's parameters, applies the message-level checks of :mod:`gpf_nav.ros.validation`, feeds the engine,
+and hands every output message to a ``publish(topic, msg)`` callable. The node clock comes in as
+``now_ns`` with each call. Two drivers:
+
+* ``estimator_node`` (subscriptions, timers on the node clock, publishers);
+* ``gpf-nav replay`` (:mod:`gpf_nav.ros.replay`): messages from a rosbag2 bag, the node clock being each
+  message's recording time.
+
+So both apply the same parameters, checks, counters and outputs. Topic names are the node's
+(relative: resolved in the node's namespace), in :data:`INPUT_TOPICS` and :data:`OUTPUT_TOPICS`.
+"""
+from __future__ import annotations
+
+import math
+import time
+from typing import Callable
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped, Vector3Stamped
+from nav_msgs.msg import Odometry
+from sensor_msgs.msg import Imu, Range
+from std_msgs.msg import Float64
+
+from gpf_nav.ros import conversions as conv
+from gpf_nav.ros import diagnostics as diag
+from gpf_nav.ros import validation as val
+from gpf_nav.ros.engine import EngineConfig, EstimatorEngine
+from gpf_nav.ros.factory import make_filter, make_lunar_model
+from gpf_nav.ros.params import ParameterError
+
+LOG_THROTTLE = 5.0  # s (wall clock) between two log lines about the same refusal reason
+
+INPUT_TOPICS = {"measurements/rae": ("rae", Vector3Stamped), "measurements/range": ("range", Range),
+                "imu": ("imu", Imu), "set_pose": ("set_pose", PoseWithCovarianceStamped)}
+"""topic -> (stream name used in the counters, message type)."""
+
+OUTPUT_TOPICS = {"odometry/filtered": Odometry, "gpf/ess": Float64, "gpf/costate": Vector3Stamped,
+                 "gpf/unmodelled_acceleration": Vector3Stamped, "gpf/particles": PoseArray,
+                 "/diagnostics": DiagnosticArray}
+
+
+def check_estimator_parameters(p: dict) -> list[str]:
+    """Errors in the non-filter parameters (the filter's are checked by ``make_filter``)."""
+    errors = []
+    positive = ("max_future", "imu_timeout", "max_extrapolation", "diagnostics_period",
+                "sensor_timeout", "quaternion_tolerance")
+    for key in positive:
+        if not (math.isfinite(p[key]) and p[key] > 0):
+            errors.append(f"parameter '{key}' = {p[key]!r} must be positive")
+    for key in ("publish_rate", "max_measurement_rate", "reinit_hold"):
+        if not (math.isfinite(p[key]) and p[key] >= 0):
+            errors.append(f"parameter '{key}' = {p[key]!r} must be >= 0")
+    if p["init_window"] < 2:
+        errors.append(f"parameter 'init_window' = {p['init_window']} must be >= 2")
+    if p["queue_depth"] < 1:
+        errors.append(f"parameter 'queue_depth' = {p['queue_depth']} must be >= 1")
+    if p["max_published_particles"] < 0:
+        errors.append(f"parameter 'max_published_particles' = {p['max_published_particles']} must be >= 0")
+    if not (math.isfinite(p["ess_warn_threshold"]) and 0 <= p["ess_warn_threshold"] <= 1):
+        errors.append(f"parameter 'ess_warn_threshold' = {p['ess_warn_threshold']!r} must lie in [0, 1]")
+    if not p["costate_warn_threshold"] > 0:
+        errors.append(f"parameter 'costate_warn_threshold' = {p['costate_warn_threshold']!r} must be positive")
+    if p["initial_state"] is not None and (len(p["initial_state"]) != 6
+                                           or not all(math.isfinite(v) for v in p["initial_state"])):
+        errors.append(f"parameter 'initial_state' = {p['initial_state']!r} must be 6 finite numbers "
+                      "[x, y, z, vx, vy, vz] (m, m/s)")
+    if len(p["initial_std"]) != 6 or not all(math.isfinite(v) and v > 0 for v in p["initial_std"]):
+        errors.append(f"parameter 'initial_std' = {p['initial_std']!r} must be 6 positive numbers")
+    if not math.isfinite(p["initial_stamp"]):
+        errors.append(f"parameter 'initial_stamp' = {p['initial_stamp']!r} must be finite")
+    if not p["world_frame"]:
+        errors.append("parameter 'world_frame' must not be empty")
+    errors.extend(check_monitor_parameters(p))
+    return errors
+
+
+def check_monitor_parameters(p: dict) -> list[str]:
+    """Errors in the ``monitor_*`` parameters (checked even when the monitor is disabled)."""
+    errors = []
+    if p["monitor_window"] < 1:
+        errors.append(f"parameter 'monitor_window' = {p['monitor_window']} must be >= 1")
+    if p["monitor_gap"] < 0:
+        errors.append(f"parameter 'monitor_gap' = {p['monitor_gap']} must be >= 0")
+    if not 2 <= p["monitor_min_reference"] <= p["monitor_reference"]:
+        errors.append(f"parameters 'monitor_min_reference' = {p['monitor_min_reference']} and 'monitor_reference' "
+                      f"= {p['monitor_reference']} must satisfy 2 <= monitor_min_reference <= monitor_reference")
+    alpha, warn = p["monitor_false_alarm_rate"], p["monitor_warn_false_alarm_rate"]
+    if not (math.isfinite(alpha) and 0.0 < alpha < 1.0):
+        errors.append(f"parameter 'monitor_false_alarm_rate' = {alpha!r} must lie in (0, 1)")
+    elif not (math.isfinite(warn) and alpha <= warn < 1.0):
+        errors.append(f"parameter 'monitor_warn_false_alarm_rate' = {warn!r} must lie in "
+                      f"[monitor_false_alarm_rate, 1) = [{alpha!r}, 1)")
+    quarantine = p["monitor_quarantine_rate"]
+    if not math.isfinite(quarantine) or (quarantine >= 0.0 and math.isfinite(alpha) and quarantine > alpha):
+        errors.append(f"parameter 'monitor_quarantine_rate' = {quarantine!r} must be negative (default) or "
+                      "lie in [0, monitor_false_alarm_rate]")
+    if not math.isfinite(p["monitor_hold"]):
+        errors.append(f"parameter 'monitor_hold' = {p['monitor_hold']!r} must be finite (negative: latched)")
+    return errors
+
+
+def monitor_options(p: dict) -> dict | None:
+    """``CostateMonitor`` keyword arguments from the node parameters (None when disabled)."""
+    if not p["monitor_enabled"]:
+        return None
+    return dict(window=p["monitor_window"], reference=p["monitor_reference"],
+                min_reference=p["monitor_min_reference"], gap=p["monitor_gap"],
+                false_alarm_rate=p["monitor_false_alarm_rate"],
+                warn_false_alarm_rate=p["monitor_warn_false_alarm_rate"],
+                quarantine_rate=None if p["monitor_quarantine_rate"] < 0 else p["monitor_quarantine_rate"])
+
+
+def filter_options(p: dict) -> dict:
+    """``make_filter`` keyword arguments from the node parameters."""
+    return dict(n_particles=p["n_particles"], seed=p["seed"], reference=p["reference"],
+                weighting=p["weighting"], metric=p["metric"], regularization=p["regularization"],
+                unmodelled_acceleration_std=p["unmodelled_acceleration_std"],
+                unmodelled_acceleration_time=p["unmodelled_acceleration_time"],
+                kernel_bandwidth=p["kernel_bandwidth"], collapse_steps=p["collapse_steps"], resampling=p["resampling"],
+                ess_threshold=p["ess_threshold"], compute_costate=p["compute_costate"],
+                ukf_alpha=p["ukf_alpha"], ukf_beta=p["ukf_beta"], ukf_kappa=p["ukf_kappa"])
+
+
+class EstimatorCore:
+    """The estimator's message handling. Raises :class:`ParameterError` on invalid parameters.
+
+    Args:
+        params: the estimator's parameter values (``gpf_nav.ros.params.ESTIMATOR`` names).
+        publish: ``publish(topic, msg)``, topic one of :data:`OUTPUT_TOPICS`.
+        logger: anything with ``info``, ``warning`` and ``error`` methods taking one string.
+        monotonic: steady clock [s] of the engine (rate limit, ERROR and alarm holds).
+        wants_particles: True when ``gpf/particles`` has a reader (it costs a decimation per update).
+    """
+
+    def __init__(self, params: dict, publish: Callable[[str, object], None], logger,
+                 monotonic: Callable[[], float] = time.monotonic,
+                 wants_particles: Callable[[], bool] = lambda: False):
+        p = self.params = params
+        errors = check_estimator_parameters(p)
+        try:
+            self.model = make_lunar_model(mu=p["mu"], station=p["station"],
+                                          range_noise_std=p["range_noise_std"],
+                                          angle_noise_std=p["angle_noise_std"],
+                                          accel_noise_density=p["accel_noise_density"],
+                                          max_step=p["max_step"])
+        except ValueError as err:
+            errors.append(str(err))
+            self.model = None
+        if self.model is not None:
+            try:
+                make_filter(p["filter"], self.model, **filter_options(p))
+            except ValueError as err:
+                errors.append(str(err))
+        if errors:
+            raise ParameterError("invalid parameters: " + "; ".join(errors))
+        self.filter_name = p["filter"]
+        config = EngineConfig(
+            max_future=p["max_future"], imu_timeout=p["imu_timeout"], init_window=p["init_window"],
+            initial_state=None if p["initial_state"] is None else np.array(p["initial_state"]),
+            initial_std=np.array(p["initial_std"]), initial_stamp=p["initial_stamp"],
+            max_measurement_rate=p["max_measurement_rate"], max_extrapolation=p["max_extrapolation"],
+            reinit_hold=p["reinit_hold"], monitor=monitor_options(p), monitor_hold=p["monitor_hold"])
+        self.engine = EstimatorEngine(lambda: make_filter(p["filter"], self.model, **filter_options(p)),
+                                      self.model, config, monotonic=monotonic)
+        self.thresholds = diag.Thresholds(ess_warn=p["ess_warn_threshold"],
+                                          costate_warn=p["costate_warn_threshold"],
+                                          sensor_timeout=p["sensor_timeout"])
+        self.publish = publish
+        self.logger = logger
+        self.wants_particles = wants_particles
+        self._handlers = {"rae": self._on_rae, "range": self._on_range, "imu": self._on_imu,
+                          "set_pose": self._on_set_pose}
+        self._last_log: dict[str, float] = {}
+        self._integrity_level = "OK"
+        self._last_published_ns: int | None = None
+        self._last_now_ns = 0
+
+    def describe(self) -> str:
+        """One line: filter, N, world frame and where the initial state comes from."""
+        p = self.params
+        return (f"{self.filter_name} estimator up: N={p['n_particles']}, world_frame={p['world_frame']}, "
+                f"initialisation from " + ("parameters" if p["initial_state"] is not None else
+                                           f"set_pose or the first {p['init_window']} measurements"))
+
+    # --- inputs ----------------------------------------------------------------------------------------
+    def handle(self, stream: str, msg, now_ns: int) -> None:
+        """Process one message of ``stream`` (``rae``, ``range``, ``imu``, ``set_pose``) received at node
+        time ``now_ns``. An unexpected exception is counted (``internal_error``) and logged, never raised."""
+        try:
+            self._handlers[stream](msg, now_ns)
+        except Exception as err:  # noqa: BLE001 - the last-resort net: the estimator goes on
+            self._refuse(stream, "internal_error", f"{type(err).__name__}: {err}")
+
+    def reset(self) -> str:
+        """Back to the start-up state (the ``~/reset`` service); returns what it re-initialises from."""
+        self.engine.reset()
+        self._last_published_ns = None
+        return "filter reset; it re-initialises from " + (self.engine.init_source or
+                                                          "set_pose or the next measurements")
+
+    def _throttled(self, key: str) -> bool:
+        now = time.monotonic()
+        if now - self._last_log.get(key, -math.inf) < LOG_THROTTLE:
+            return False
+        self._last_log[key] = now
+        return True
+
+    def _refuse(self, stream: str, reason: str, detail: str, counted: bool = False) -> None:
+        """Count (unless the engine did) and log, at most once per LOG_THROTTLE s per reason."""
+        c = self.engine.counters
+        n = c.rejected[reason] if counted else c.reject(stream, reason)
+        if self._throttled(reason):
+            self.logger.warning(f"dropped {stream} message: {reason}: {detail} ({n} so far)")
+
+    def _check_header(self, stream: str, header, frame: str) -> int | None:
+        """Stamp in ns, or None after refusing the message."""
+        ok, reason = val.check_stamp(header.stamp.sec, header.stamp.nanosec)
+        if not ok:
+            self._refuse(stream, reason, f"stamp sec={header.stamp.sec} nanosec={header.stamp.nanosec}")
+            return None
+        ok, reason = val.check_frame(header.frame_id, frame)
+        if not ok:
+            self._refuse(stream, reason, f"frame_id '{header.frame_id}', expected '{frame}'")
+            return None
+        return conv.stamp_to_ns(header.stamp)
+
+    def _timing_detail(self, stamp_ns: int, now_ns: int) -> str:
+        last = self.engine.last_measurement_ns
+        return (f"stamp {stamp_ns * 1e-9:.3f} s, last processed "
+                f"{'none' if last is None else f'{last * 1e-9:.3f} s'}, node clock {now_ns * 1e-9:.3f} s")
+
+    def _on_rae(self, msg: Vector3Stamped, now_ns: int) -> None:
+        stamp = self._check_header("rae", msg.header, self.params["measurement_frame"])
+        if stamp is None:
+            return
+        ok, reason, values = val.check_rae(*conv.rae_values(msg))
+        if not ok:
+            self._refuse("rae", reason, f"(range, azimuth, elevation) = {values}")
+            return
+        self._measurement("rae", stamp, np.array(values), now_ns)
+
+    def _on_range(self, msg: Range, now_ns: int) -> None:
+        stamp = self._check_header("range", msg.header, self.params["measurement_frame"])
+        if stamp is None:
+            return
+        ok, reason = val.check_range(msg.range, msg.min_range, msg.max_range)
+        if not ok:
+            self._refuse("range", reason, f"range {msg.range} with limits [{msg.min_range}, {msg.max_range}]")
+            return
+        self._measurement("range", stamp, np.array([float(msg.range), np.nan, np.nan]), now_ns)
+
+    def _measurement(self, stream: str, stamp: int, y: np.ndarray, now_ns: int) -> None:
+        ok, reason = self.engine.measurement(stamp, y, now_ns, stream)
+        if not ok:
+            if reason == "filter_error":
+                self.logger.error(f"filter re-initialised from the last good estimate: "
+                                  f"{self.engine.last_reinit_reason}")
+            self._refuse(stream, reason, self._timing_detail(stamp, now_ns), counted=True)
+            return
+        if reason == "buffered":
+            return
+        self._publish(stamp, self.engine.mean, self.engine.cov, update=True)
+        self._log_integrity(stamp)
+
+    def _log_integrity(self, stamp: int) -> None:
+        """A WARN log line when the monitor goes to FAULT (at most once per LOG_THROTTLE s)."""
+        monitor = self.engine.monitor
+        level = monitor.level if monitor is not None else "OK"
+        previous, self._integrity_level = self._integrity_level, level
+        if level != "FAULT" or previous == "FAULT" or not self._throttled("_integrity"):
+            return
+        s = monitor.status
+        self.logger.warning(
+            f"integrity FAULT at {stamp * 1e-9:.3f} s: the mean co-state is biased (T^2 {s.statistic:.4g} > "
+            f"{s.threshold:.4g}, p = {s.p_value:.2g}): the model, the sensors or the filter disagree with the data")
+
+    def _on_imu(self, msg: Imu, now_ns: int) -> None:
+        stamp = self._check_header("imu", msg.header, self.params["imu_frame"])
+        if stamp is None:
+            return
+        if float(msg.linear_acceleration_covariance[0]) == -1.0:
+            self._refuse("imu", "not_provided", "linear_acceleration_covariance[0] == -1")
+            return
+        a = msg.linear_acceleration
+        ok, reason = val.check_finite(a.x, a.y, a.z)
+        if ok and conv.imu_has_orientation(msg):
+            q = msg.orientation
+            ok, reason = val.check_quaternion(q.x, q.y, q.z, q.w, self.params["quaternion_tolerance"])
+        if not ok:
+            q = msg.orientation
+            self._refuse("imu", reason, f"linear_acceleration ({a.x}, {a.y}, {a.z}), "
+                                        f"orientation ({q.x}, {q.y}, {q.z}, {q.w})")
+            return
+        ok, reason = self.engine.imu(stamp, conv.imu_specific_force(msg), now_ns)
+        if not ok:
+            self._refuse("imu", reason, self._timing_detail(stamp, now_ns), counted=True)
+
+    def _on_set_pose(self, msg: PoseWithCovarianceStamped, now_ns: int) -> None:
+        stamp = self._check_header("set_pose", msg.header, self.params["world_frame"])
+        if stamp is None:
+            return
+        if stamp == 0:
+            stamp = now_ns
+        pos = msg.pose.pose.position
+        cov = conv.position_covariance(msg.pose.covariance)
+        ok, reason = val.check_finite(pos.x, pos.y, pos.z, *cov.reshape(-1))
+        if not ok:
+            self._refuse("set_pose", reason, f"position ({pos.x}, {pos.y}, {pos.z}) or covariance")
+            return
+        if not np.any(cov) or np.linalg.eigvalsh(0.5 * (cov + cov.T)).min() <= 0.0:
+            cov = None  # not given or not positive definite: initial_std
+        ok, reason = self.engine.set_pose(stamp, np.array([pos.x, pos.y, pos.z]), cov, now_ns)
+        if not ok:
+            self._refuse("set_pose", reason, self._timing_detail(stamp, now_ns), counted=True)
+            return
+        self.logger.info(f"initialised from set_pose at {stamp * 1e-9:.3f} s")
+        self._publish(stamp, self.engine.mean, self.engine.cov, update=False)
+
+    # --- outputs ---------------------------------------------------------------------------------------
+    def _publish(self, stamp: int, mean: np.ndarray, cov: np.ndarray, update: bool) -> None:
+        if mean is None or not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
+            return
+        p = self.params
+        self.publish("odometry/filtered", conv.odometry_msg(mean, cov, stamp, p["world_frame"], p["base_frame"],
+                                                            self.model.position_index, self.model.velocity_index))
+        self._last_published_ns = stamp if self._last_published_ns is None else max(stamp, self._last_published_ns)
+        if not update:
+            return
+        f = self.engine.filter
+        stats = self.engine.filter_stats()
+        if "ess" in stats and math.isfinite(stats["ess"]):
+            self.publish("gpf/ess", Float64(data=stats["ess"]))
+        if "unmodelled_acceleration" in stats:
+            self.publish("gpf/unmodelled_acceleration",
+                         conv.vector3_stamped(stats["unmodelled_acceleration"], stamp, p["world_frame"]))
+        if self.engine.has_costate:
+            lam = np.asarray(f.costate_mean, dtype=float)
+            if np.all(np.isfinite(lam)):
+                self.publish("gpf/costate", conv.vector3_stamped(lam, stamp, p["measurement_frame"] or p["world_frame"]))
+        k = p["max_published_particles"]
+        if k > 0 and hasattr(f, "particles") and self.wants_particles():
+            particles = np.asarray(f.particles)
+            weights = getattr(f, "weights", None)
+            if weights is None:
+                weights = np.full(particles.shape[0], 1.0 / particles.shape[0])
+            chosen = particles[conv.decimate(particles, np.asarray(weights), k)][:, list(self.model.position_index)]
+            chosen = chosen[np.all(np.isfinite(chosen), axis=1)]
+            self.publish("gpf/particles", conv.pose_array_msg(chosen, stamp, p["world_frame"]))
+
+    def publish_tick(self, now_ns: int) -> None:
+        """The ``publish_rate`` timer: predicted odometry at ``now_ns`` (and a reset if the clock jumped back)."""
+        if not now_ns:
+            return
+        if now_ns < self._last_now_ns - 1_000_000_000:
+            self.logger.warning(f"node clock jumped back from {self._last_now_ns * 1e-9:.3f} s to "
+                                f"{now_ns * 1e-9:.3f} s: resetting the filter")
+            self.engine.reset()
+            self._last_published_ns = None
+        self._last_now_ns = now_ns
+        if not self.engine.initialized:
+            return
+        if self._last_published_ns is not None and now_ns <= self._last_published_ns:
+            return
+        est = self.engine.extrapolate(now_ns)
+        if est is not None:
+            self._publish(now_ns, est[0], est[1], update=False)
+
+    def diagnostics_tick(self, now_ns: int, uptime: float, hardware_id: str) -> tuple[int, str]:
+        """The ``diagnostics_period`` timer: publish ``/diagnostics``; returns ``(level, message)``."""
+        level, message, values = diag.filter_status(self.engine, now_ns, self.thresholds, self.filter_name,
+                                                    uptime=uptime)
+        self.publish("/diagnostics", diag.to_msg(level, message, values, conv.ns_to_stamp(now_ns),
+                                                 hardware_id=hardware_id))
+        if not self.engine.initialized and self._throttled("_not_initialized"):
+            self.logger.warning(f"filter not initialised: no odometry yet; {self.engine.waiting_for()}")
+        return level, message

@@ -1,0 +1,104 @@
+"""``gpf-nav record OUT``: the simulator's scenario written as a rosbag2 bag, without running ROS.
+
+The same parameters (``config/simulator.yaml``, ``-p name:=value``), events
+(:func:`gpf_nav.ros.playback.build_events`) and messages (:func:`gpf_nav.ros.simulator_node.event_message`)
+as ``ros2 run gpf_nav simulator`` with ``publish_clock: true`` at ``rate_factor`` 1, only as fast as the
+disk allows:
+
+* ``/measurements/rae``, ``/imu``, ``/truth/odometry`` stamped ``start_time`` + trajectory time;
+* ``/clock`` every ``1 / clock_rate`` s of simulated time, before the events of the same time;
+* each message's recording time is its stamp (``/clock``: its time); each topic's offered QoS is the
+  simulator's (reliable, keep last 50, volatile), so ``ros2 bag play`` publishes it the same way.
+
+Play it with ``ros2 bag play OUT`` and run the subscribers with ``use_sim_time:=true`` (the bag carries
+``/clock``; do not add ``--clock``). Exit status 2, after one line on stderr, on invalid parameters or an
+existing ``OUT``.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from gpf_nav.ros.bag import STORAGES, BagError, BagWriter, absolute, qos_profile
+from gpf_nav.ros.params import ParameterError, parameters_from_files, simulator_specs
+
+CLOCK_TOPIC = "/clock"
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="gpf-nav record", description=__doc__.split("\n\n")[0])
+    ap.add_argument("out", metavar="OUT", help="bag directory to create")
+    ap.add_argument("--duration", type=float, help="simulated seconds (scenario.duration; default 2400)")
+    ap.add_argument("--case", choices=("full", "partial"), help="measurement case (scenario.case; default full)")
+    ap.add_argument("--seed", type=int, help="scenario seed (default 0)")
+    ap.add_argument("--storage", choices=STORAGES, default="mcap", help="rosbag2 storage (default mcap)")
+    ap.add_argument("--params-file", action="append", default=[], metavar="YAML",
+                    help="simulator parameters (ROS 2 params file, e.g. config/simulator.yaml); repeatable")
+    ap.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE",
+                    help="one simulator parameter, e.g. -p scenario.epsilon:=0.0; repeatable")
+    return ap
+
+
+def simulator_parameters(args) -> dict:
+    """The simulator's parameters from the files, ``-p`` and the shortcut options (in that order)."""
+    from gpf_nav.ros.simulator_node import NODE_NAME
+    assignments = list(args.param)
+    for option, name in (("duration", "scenario.duration"), ("case", "scenario.case"), ("seed", "seed")):
+        value = getattr(args, option)
+        if value is not None:
+            assignments.append(f"{name}:={value}")
+    return parameters_from_files(simulator_specs(), NODE_NAME, args.params_file, assignments)
+
+
+def record(out: str, p: dict, storage: str = "mcap") -> dict:
+    """Write the scenario of simulator parameters ``p`` to the bag ``out``; returns counts per topic."""
+    from rosgraph_msgs.msg import Clock
+
+    from gpf_nav.ros import conversions as conv
+    from gpf_nav.ros.playback import NS, build_events
+    from gpf_nav.ros.simulator_node import (EVENT_TOPICS, QOS_DEPTH, check_simulator_parameters,
+                                            event_message, scenario_from_parameters)
+    errors = check_simulator_parameters(p)
+    if not errors:
+        try:
+            _, scenario = scenario_from_parameters(p)
+        except (ValueError, OSError) as err:
+            errors.append(f"scenario: {err}")
+    if errors:
+        raise ParameterError("invalid parameters: " + "; ".join(errors))
+    events = build_events(scenario, p["imu_rate"], p["imu_noise_std"], p["truth_rate"], p["seed"])
+    epoch = int(round(p["start_time"] * 1e9))
+    span = max(e.t_ns for e in events)
+    period = int(round(NS / p["clock_rate"]))
+    qos = qos_profile(reliable=True, depth=QOS_DEPTH)
+    topics = {absolute(topic): (msg_type, qos) for topic, msg_type in EVENT_TOPICS.values()}
+    topics[CLOCK_TOPIC] = (Clock, qos)
+    with BagWriter(out, storage, topics) as bag:
+        tick = 0
+        for event in events + [None]:
+            until = span if event is None else event.t_ns
+            while tick <= until:
+                bag.write(CLOCK_TOPIC, Clock(clock=conv.ns_to_stamp(epoch + tick)), epoch + tick)
+                tick += period
+            if event is not None:
+                topic, msg = event_message(event, epoch + event.t_ns, p)
+                bag.write(absolute(topic), msg, epoch + event.t_ns)
+    return bag.counts
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    start = time.perf_counter()
+    try:
+        counts = record(args.out, simulator_parameters(args), args.storage)
+    except (ParameterError, BagError) as err:
+        print(f"gpf-nav record: {err}", file=sys.stderr)
+        return 2
+    listing = ", ".join(f"{topic} {n}" for topic, n in counts.items())
+    print(f"gpf-nav record: wrote {args.out} ({args.storage}) in {time.perf_counter() - start:.1f} s: {listing}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
