@@ -18,10 +18,12 @@ setup(
     python_requires=">=3.10",
     install_requires=["setuptools", "numpy", "scipy"],
     extras_require={
-        # ROS 2 Jazzy Python client from PyPI, for machines without a system ROS installation.
-        "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces"],
+        # ROS 2 Jazzy Python client from PyPI, for machines without a system ROS installation; rosbags
+        # (pure Python rosbag2 reader/writer) for gpf-nav record / replay.
+        "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces", "rosbags"],
         "experiments": ["matplotlib", "tqdm", "dask[distributed]"],
-        "test": ["pytest", "hypothesis", "colcon-core", "colcon-ros"],
+        # mcap-ros2-support: an independent reader of the bags gpf-nav replay writes.
+        "test": ["pytest", "hypothesis", "colcon-core", "colcon-ros", "mcap-ros2-support"],
     },
     zip_safe=True,
     maintainer="gpf_nav maintainers",

@@ -5,6 +5,8 @@
     gpf-nav sweep        mismatch / noise sweeps (``gpf_nav.experiments.sweep``)
     gpf-nav integrity    co-state monitor false alarms and detection delays (``gpf_nav.experiments.integrity``)
     gpf-nav demo         simulator + estimator over ROS 2, with a summary (``gpf_nav.ros.demo``)
+    gpf-nav record       the simulator's scenario written as a rosbag2 bag (``gpf_nav.ros.record``)
+    gpf-nav replay       the estimator run offline over a rosbag2 bag, with a summary (``gpf_nav.ros.replay``)
 
 Sub-command modules are imported lazily, so e.g. ``bench`` needs neither ROS nor matplotlib. Every
 sub-command runs with the heap tuning of :mod:`gpf_nav.allocator`.
@@ -22,6 +24,8 @@ COMMANDS = {
     "sweep": "gpf_nav.experiments.sweep",
     "demo": "gpf_nav.ros.demo",
     "integrity": "gpf_nav.experiments.integrity",
+    "record": "gpf_nav.ros.record",
+    "replay": "gpf_nav.ros.replay",
 }
 
 

@@ -221,3 +221,28 @@ def sweep(values: np.ndarray, table: dict, param_label: str, runs: int, path: Pa
     _shared_legend(fig, axes[0][0])
     fig.suptitle(f"Position RMSE against {param_label.split(' (')[0]}, {runs} Monte Carlo runs per point")
     return _save(fig, path)
+
+
+def estimate_errors(times: np.ndarray, errors: np.ndarray, sigmas: np.ndarray, title: str, path: Path) -> Path:
+    """Per-axis error of one run against truth with the filter's 3-sigma bounds.
+
+    ``times`` ``(K,)`` s, ``errors`` and ``sigmas`` ``(K, 6)`` (estimate - truth and the filter's standard
+    deviations of ``x, y, z`` in m and ``vx, vy, vz`` in m/s). Top row position, bottom row velocity.
+    """
+    plt = _pyplot()
+    fig, axes = plt.subplots(2, 3, figsize=(14.0, 6.5), sharex=True, layout="constrained")
+    labels = [("x", "m"), ("y", "m"), ("z", "m"), ("vx", "m/s"), ("vy", "m/s"), ("vz", "m/s")]
+    for i, ax in enumerate(axes.reshape(-1)):
+        name, unit = labels[i]
+        ax.fill_between(times, -3 * sigmas[:, i], 3 * sigmas[:, i], color="#1f77b4", alpha=0.2, lw=0,
+                        label="±3σ (filter)")
+        ax.plot(times, errors[:, i], color="#d62728", lw=0.9, label="estimate - truth")
+        inside = np.mean(np.abs(errors[:, i]) <= 3 * sigmas[:, i]) if len(times) else np.nan
+        ax.set_title(f"{name}: {100 * inside:.0f} % of updates within 3σ", fontsize=9)
+        ax.set_ylabel(f"{name} error ({unit})")
+        ax.grid(True, alpha=0.3)
+        if i >= 3:
+            ax.set_xlabel("time since the first update (s)")
+    axes[0][0].legend(fontsize=8, loc="upper right")
+    fig.suptitle(title)
+    return _save(fig, path)

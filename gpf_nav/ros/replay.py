@@ -1,0 +1,374 @@
+"""``gpf-nav replay BAG --out DIR``: the estimator run offline over a rosbag2 bag, as fast as the CPU allows.
+
+The estimator node's own message handling (:class:`gpf_nav.ros.estimator_core.EstimatorCore`: same
+parameters, checks, counters and outputs) is fed the bag's messages in recording order, with no ROS
+graph and no waiting:
+
+* inputs: the node's topics ``measurements/rae``, ``measurements/range``, ``imu``, ``set_pose``, plus
+  ``truth/odometry`` for the evaluation; each remappable (``--remap measurements/rae:=/tracking/rae``);
+* time: header stamps drive the filter, as in the node; the node clock at each message (for the
+  ``future_stamp`` check, ``set_pose`` with a zero stamp) is the message's recording time, and the
+  engine's steady clock (rate limit, ERROR and alarm holds) is that time too, so a bag replays as it was
+  received. The ``publish_rate`` and ``diagnostics_period`` timers tick on it;
+* parameters: ``--params-file`` (e.g. ``config/estimator.yaml``) and ``-p name:=value`` as for the node;
+* outputs: ``DIR/estimates``, a rosbag2 bag of what the node publishes (``/odometry/filtered``,
+  ``/gpf/ess``, ``/gpf/costate``, ``/diagnostics``; ``/gpf/particles`` with ``--particles``), recorded at
+  the node-clock time they would be published; ``DIR/summary.json``, printed too; ``DIR/errors.png``
+  (per-axis error and 3-sigma bounds) when the bag has truth.
+
+Truth is compared with the estimate of every filter update (the posterior at each measurement stamp),
+linearly interpolated between truth samples at most :data:`TRUTH_GAP` s apart; truth messages in another
+frame than ``world_frame`` are not used. Exit status 2, after one line on stderr, on invalid
+parameters, an unreadable or truncated bag, a topic of the wrong type, or no measurement topic.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import shutil
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+from nav_msgs.msg import Odometry
+
+from gpf_nav.ros.bag import (STORAGES, BagError, BagReader, BagWriter, absolute, deserialize, qos_profile,
+                             type_name)
+from gpf_nav.ros.conversions import odometry_state, stamp_to_ns
+from gpf_nav.ros.estimator_core import INPUT_TOPICS, OUTPUT_TOPICS, EstimatorCore
+from gpf_nav.ros.params import ESTIMATOR, ParameterError, parameters_from_files
+
+TRUTH_TOPIC = "truth/odometry"
+TRUTH_GAP = 1.0
+"""s: truth is interpolated only between samples at most this far apart."""
+OUTPUT_DEPTH = 10  # the node's reliable publishers
+
+
+class ReplayError(Exception):
+    """A replay that cannot run (one-line message): bad remapping, wrong topic types, nothing to estimate."""
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="gpf-nav replay", description=__doc__.split("\n\n")[0])
+    ap.add_argument("bag", metavar="BAG", help="rosbag2 bag directory (MCAP or sqlite3)")
+    ap.add_argument("--out", required=True, metavar="DIR", help="output directory (created)")
+    ap.add_argument("--remap", action="append", default=[], metavar="FROM:=TO",
+                    help="topic remapping, node name := bag name, e.g. measurements/rae:=/tracking/rae")
+    ap.add_argument("--params-file", action="append", default=[], metavar="YAML",
+                    help="estimator parameters (ROS 2 params file, e.g. config/estimator.yaml); repeatable")
+    ap.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE",
+                    help="one estimator parameter, e.g. -p n_particles:=1000; repeatable")
+    ap.add_argument("--storage", choices=STORAGES, default="mcap", help="output bag storage (default mcap)")
+    ap.add_argument("--particles", action="store_true", help="also write gpf/particles")
+    ap.add_argument("--no-figure", action="store_true", help="do not draw errors.png")
+    ap.add_argument("--no-progress", action="store_true", help="no progress bar")
+    ap.add_argument("--json", action="store_true", help="print the summary as JSON")
+    return ap
+
+
+def parse_remaps(remaps) -> dict[str, str]:
+    """``["from:=to", ...]`` -> ``{absolute from: absolute to}``."""
+    out = {}
+    for text in remaps:
+        src, sep, dst = text.partition(":=")
+        if not sep or not src or not dst:
+            raise ReplayError(f"remapping {text!r} must read from:=to")
+        out[absolute(src)] = absolute(dst)
+    return out
+
+
+class _Log:
+    """Log lines of the estimator core on stderr, above the progress bar; also counted per level."""
+
+    def __init__(self, write):
+        self._write = write
+        self.lines = Counter()
+
+    def _line(self, level: str, text: str) -> None:
+        self.lines[level] += 1
+        self._write(f"[{level}] {text}")
+
+    def info(self, text: str) -> None:
+        self._line("INFO", text)
+
+    def warning(self, text: str) -> None:
+        self._line("WARN", text)
+
+    def error(self, text: str) -> None:
+        self._line("ERROR", text)
+
+
+def _progress(total: int, disable: bool):
+    """A tqdm bar on stderr (None without tqdm or when disabled) and a line writer that respects it."""
+    def plain(text):
+        print(text, file=sys.stderr)
+    if disable:
+        return None, plain
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return None, plain
+    bar = tqdm(total=total, unit="msg", unit_scale=True, mininterval=0.5, file=sys.stderr,
+               desc="replay", dynamic_ncols=True)
+    return bar, lambda text: tqdm.write(text, file=sys.stderr)
+
+
+def replay(bag_path: str, out_dir: str, params: dict, remaps: dict | None = None, storage: str = "mcap",
+           particles: bool = False, progress: bool = True) -> tuple[dict, tuple | None]:
+    """Run the estimator over ``bag_path``; write ``out_dir/estimates``. Returns the summary dict and, when
+    there was truth, ``(times (K,) s, errors (K, 6), sigmas (K, 6))`` of the compared updates.
+
+    Raises :class:`BagError`, :class:`ReplayError` or :class:`ParameterError` (nothing is left in
+    ``out_dir/estimates`` then).
+    """
+    remaps = remaps or {}
+    name = {topic: remaps.get(absolute(topic), absolute(topic))
+            for topic in [*INPUT_TOPICS, TRUTH_TOPIC, *OUTPUT_TOPICS]}
+    inputs = {name[t]: (stream, msg_type) for t, (stream, msg_type) in INPUT_TOPICS.items()}
+    inputs[name[TRUTH_TOPIC]] = ("truth", Odometry)
+    out_dir = Path(out_dir)
+    out_bag = out_dir / "estimates"
+    with BagReader(bag_path) as reader:
+        present = {t: spec for t, spec in inputs.items() if t in reader.topics}
+        for topic, (_, msg_type) in present.items():
+            expected = type_name(msg_type)
+            if reader.topics[topic] != expected:
+                raise ReplayError(f"topic {topic} in {bag_path} has type {reader.topics[topic]}; the estimator "
+                                  f"expects {expected} (remap another topic with --remap)")
+        if not any(present.get(name[t], ("",))[0] in ("rae", "range")
+                   for t in ("measurements/rae", "measurements/range")):
+            raise ReplayError(f"no measurements in {bag_path}: neither {name['measurements/rae']} nor "
+                              f"{name['measurements/range']} is in it (topics: {', '.join(sorted(reader.topics))}); "
+                              "use --remap measurements/rae:=/your/topic")
+        out_dir.mkdir(parents=True, exist_ok=True)
+        if out_bag.exists():
+            raise BagError(f"{out_bag} exists already; choose another --out")
+        try:
+            return _run(reader, out_bag, params, name, present, storage, particles, progress)
+        except BaseException:
+            shutil.rmtree(out_bag, ignore_errors=True)
+            raise
+
+
+def _run(reader, out_bag, params, name, present, storage, particles, progress) -> tuple[dict, tuple | None]:
+    wall_start = time.perf_counter()
+    total = sum(reader.counts[t] for t in present)
+    bar, write_line = _progress(total, disable=not progress)
+    log = _Log(write_line)
+    qos = qos_profile(reliable=True, depth=OUTPUT_DEPTH)
+    wanted_outputs = {t: m for t, m in OUTPUT_TOPICS.items() if particles or t != "gpf/particles"}
+    clock = {"now": reader.start_ns, "update": False}
+    updates: list[tuple[int, np.ndarray, np.ndarray]] = []
+    truth: dict[int, np.ndarray] = {}
+    read, undecodable, truth_wrong_frame = Counter(), Counter(), 0
+    last_diag = {"level": None, "message": "none published"}
+
+    with BagWriter(out_bag, storage, {name[t]: (m, qos) for t, m in wanted_outputs.items()}) as writer:
+        def publish(topic: str, msg) -> None:
+            if topic not in wanted_outputs:
+                return
+            writer.write(name[topic], msg, clock["now"])
+            if topic == "odometry/filtered" and clock["update"]:
+                updates.append((stamp_to_ns(msg.header.stamp), core.engine.mean.copy(), core.engine.cov.copy()))
+
+        core = EstimatorCore(params, publish, log, monotonic=lambda: clock["now"] * 1e-9,
+                             wants_particles=lambda: particles)
+        log.info(core.describe())
+        hardware_id = "/gpf_estimator"
+        publish_period = int(round(1e9 / params["publish_rate"])) if params["publish_rate"] > 0 else 0
+        diag_period = int(round(1e9 * params["diagnostics_period"]))
+        next_publish = reader.start_ns + publish_period
+        next_diag = reader.start_ns + diag_period
+
+        def timers(until_ns: int) -> None:
+            """Fire the timers due strictly before ``until_ns``, in time order."""
+            nonlocal next_publish, next_diag
+            while True:
+                t_pub = next_publish if publish_period else math.inf
+                t = min(t_pub, next_diag)
+                if t >= until_ns:
+                    return
+                clock["now"] = t
+                if t == t_pub:
+                    core.publish_tick(t)
+                    next_publish += publish_period
+                else:
+                    level, message = core.diagnostics_tick(t, (t - reader.start_ns) * 1e-9, hardware_id)
+                    last_diag.update(level=level, message=message)
+                    next_diag += diag_period
+
+        for topic, t_ns, raw in reader.messages(present):
+            timers(t_ns)
+            clock["now"] = t_ns
+            read[topic] += 1
+            stream, msg_type = present[topic]
+            try:
+                msg = deserialize(raw, msg_type)
+            except Exception:  # noqa: BLE001 - a corrupt record is dropped and counted
+                undecodable[topic] += 1
+                if undecodable[topic] == 1:
+                    log.warning(f"dropped a message on {topic} that does not deserialise as {msg_type.__name__}")
+                msg = None
+            if msg is not None:
+                if stream == "truth":
+                    if msg.header.frame_id == params["world_frame"]:
+                        truth[stamp_to_ns(msg.header.stamp)] = odometry_state(msg)
+                    else:
+                        truth_wrong_frame += 1
+                else:
+                    clock["update"] = stream in ("rae", "range")
+                    core.handle(stream, msg, t_ns)
+                    clock["update"] = False
+            if bar is not None:
+                bar.update(1)
+        timers(reader.end_ns + 1)
+        clock["now"] = max(reader.end_ns, clock["now"])
+        level, message = core.diagnostics_tick(clock["now"], (clock["now"] - reader.start_ns) * 1e-9, hardware_id)
+        last_diag.update(level=level, message=message)
+    if bar is not None:
+        bar.close()
+    wall = time.perf_counter() - wall_start
+    return _summary(core, reader, name, present, read, undecodable, truth_wrong_frame, updates, truth,
+                    writer, storage, wall, last_diag, log)
+
+
+def truth_at(truth: dict[int, np.ndarray], stamps: np.ndarray, max_gap_ns: int) -> np.ndarray:
+    """Truth ``(K, 6)`` at ``stamps`` ``(K,)`` [ns], linearly interpolated between samples at most
+    ``max_gap_ns`` apart (NaN rows where there is no such pair, or no truth)."""
+    out = np.full((len(stamps), 6), np.nan)
+    if not truth or not len(stamps):
+        return out
+    t = np.array(sorted(truth), dtype=np.int64)
+    x = np.array([truth[k] for k in t])
+    i = np.searchsorted(t, stamps, side="left")
+    exact = (i < len(t)) & (t[np.minimum(i, len(t) - 1)] == stamps)
+    out[exact] = x[i[exact]]
+    inner = ~exact & (i > 0) & (i < len(t))
+    lo, hi = i[inner] - 1, i[inner]
+    ok = (t[hi] - t[lo]) <= max_gap_ns
+    s = ((stamps[inner] - t[lo]) / (t[hi] - t[lo]))[:, None]
+    rows = np.flatnonzero(inner)[ok]
+    out[rows] = ((1 - s) * x[lo] + s * x[hi])[ok]
+    return out
+
+
+def _summary(core, reader, name, present, read, undecodable, truth_wrong_frame, updates, truth, writer,
+             storage, wall, last_diag, log) -> tuple[dict, tuple | None]:
+    from gpf_nav.experiments.metrics import error_norms, nees, rmse
+    c = core.engine.counters
+    span = (reader.end_ns - reader.start_ns) * 1e-9
+    inputs = {}
+    for topic, (stream, _) in present.items():
+        row = {"read": read[topic], "undecodable": undecodable[topic]}
+        if stream != "truth":
+            row["accepted"] = c.accepted[stream]
+            row["rejected"] = {r: n for (s, r), n in sorted(c.rejected_by_stream.items()) if s == stream and n}
+        inputs[topic] = row
+    summary = {
+        "bag": str(reader.path), "filter": core.filter_name, "particles": core.params["n_particles"],
+        "inputs": inputs,
+        "rejected_by_reason": {r: n for r, n in c.rejected.items() if n},
+        "undecodable": sum(undecodable.values()),
+        "masked_components": c.masked,
+        "updates": len(updates),
+        "initialized_from": core.engine.init_source or None,
+        "reinitializations": core.engine.reinit_count,
+        "integrity_fault_updates": core.engine.integrity_fault_updates,
+        "diagnostics_last": {"level": {0: "OK", 1: "WARN", 2: "ERROR"}.get(last_diag["level"], "none"),
+                             "message": last_diag["message"]},
+        "log_lines": dict(log.lines),
+        "outputs": {"bag": str(writer.path), "storage": storage,
+                    "messages": writer.counts},
+        "bag_seconds": span, "wall_seconds": wall, "real_time_factor": span / wall if wall > 0 else None,
+        "truth": {"topic": name[TRUTH_TOPIC], "messages": len(truth), "wrong_frame": truth_wrong_frame},
+    }
+    stamps = np.array([u[0] for u in updates], dtype=np.int64)
+    ref = truth_at(truth, stamps, int(TRUTH_GAP * 1e9))
+    have = np.all(np.isfinite(ref), axis=1)
+    summary["truth"]["compared_updates"] = int(have.sum())
+    evaluation = None
+    if have.any():
+        p, v = list(core.model.position_index), list(core.model.velocity_index)
+        means = np.array([u[1] for u in updates])[have]
+        covs = np.array([u[2] for u in updates])[have]
+        err = means - ref[have]
+        n = nees(err, covs)
+        summary["position_rmse_m"] = rmse(error_norms(means[:, p], ref[have][:, p]))
+        summary["velocity_rmse_mps"] = rmse(error_norms(means[:, v], ref[have][:, v]))
+        summary["final_position_error_m"] = float(np.linalg.norm(err[-1, p]))
+        summary["mean_nees"] = float(np.nanmean(n)) if np.any(np.isfinite(n)) else None
+        summary["nees_dof"] = len(p) + len(v)
+        order = p + v
+        sig = np.sqrt(np.maximum(np.einsum("kii->ki", covs), 0.0))[:, order]
+        evaluation = ((stamps[have] - stamps[have][0]) * 1e-9, err[:, order], sig)
+    return summary, evaluation
+
+
+def _print(summary: dict) -> None:
+    rtf = summary["real_time_factor"]
+    print(f"gpf-nav replay: {summary['filter']} N={summary['particles']} over {summary['bag']}: "
+          f"{summary['bag_seconds']:.1f} s of data in {summary['wall_seconds']:.2f} s wall, "
+          f"{'n/a' if rtf is None else f'{rtf:.0f}x'} real time")
+    print(f"  {'input topic':28} {'read':>8} {'accepted':>9} {'rejected':>9} {'undecodable':>12}")
+    for topic, row in summary["inputs"].items():
+        rejected = sum(row.get("rejected", {}).values())
+        print(f"  {topic:28} {row['read']:>8} {row.get('accepted', '-'):>9} "
+              f"{rejected if 'accepted' in row else '-':>9} {row['undecodable']:>12}")
+    reasons = summary["rejected_by_reason"]
+    print("  rejected by reason          : " + (", ".join(f"{r} {n}" for r, n in reasons.items()) or "none"))
+    print(f"  filter updates              : {summary['updates']} (initialised from "
+          f"{summary['initialized_from'] or 'nothing'}; {summary['reinitializations']} re-initialisations; "
+          f"{summary['masked_components']} masked components)")
+    t = summary["truth"]
+    if "position_rmse_m" in summary:
+        nees_text = "n/a" if summary["mean_nees"] is None else f"{summary['mean_nees']:.2f}"
+        print(f"  vs truth ({t['topic']}, {t['compared_updates']} updates): position RMSE "
+              f"{summary['position_rmse_m']:.1f} m (final {summary['final_position_error_m']:.1f} m), velocity RMSE "
+              f"{summary['velocity_rmse_mps']:.3f} m/s, mean NEES {nees_text} "
+              f"({summary['nees_dof']} for a consistent filter)")
+    else:
+        print(f"  vs truth                    : no truth to compare ({t['topic']}: {t['messages']} usable messages, "
+              f"{t['wrong_frame']} in another frame)")
+    d = summary["diagnostics_last"]
+    print(f"  last /diagnostics           : {d['level']}: {d['message']}")
+    out = summary["outputs"]
+    print(f"  output bag ({out['storage']:7})        : {out['bag']}: "
+          + ", ".join(f"{k} {n}" for k, n in out["messages"].items()))
+    for key in ("summary_file", "figure"):
+        if summary.get(key):
+            print(f"  {key.replace('_', ' '):28}: {summary[key]}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        params = parameters_from_files(ESTIMATOR, "gpf_estimator", args.params_file, args.param)
+        summary, evaluation = replay(args.bag, args.out, params, parse_remaps(args.remap), args.storage,
+                                     args.particles, progress=not args.no_progress)
+    except (ParameterError, BagError, ReplayError) as err:
+        print(f"gpf-nav replay: {err}", file=sys.stderr)
+        return 2
+    out = Path(args.out)
+    if evaluation is not None and not args.no_figure:
+        try:
+            from gpf_nav.experiments.plots import estimate_errors
+        except ImportError:
+            summary["figure"] = None
+        else:
+            title = (f"{summary['filter']} N={summary['particles']} replayed over {Path(args.bag).name}: "
+                     f"error against truth with the filter's 3σ bounds ({len(evaluation[0])} updates)")
+            summary["figure"] = str(estimate_errors(*evaluation, title, out / "errors.png"))
+    summary["summary_file"] = str(out / "summary.json")
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        _print(summary)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
