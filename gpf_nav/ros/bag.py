@@ -125,7 +125,7 @@ class BagReader:
         for c in self._reader.connections:
             self.counts[c.topic] = self.counts.get(c.topic, 0) + c.msgcount
         self.start_ns = self._reader.start_time if self._reader.message_count else 0
-        self.end_ns = self._reader.end_time if self._reader.message_count else 0
+        self.end_ns = self._reader.end_time - 1 if self._reader.message_count else 0  # rosbags: "after the latest"
 
     def messages(self, topics) -> Iterator[tuple[str, int, bytes]]:
         """``(topic, recording time [ns], serialised message)`` of ``topics`` in recording-time order."""

@@ -1,0 +1,412 @@
+"""rosbag2: ``gpf-nav record`` and ``gpf-nav replay`` on real bags, read back by independent readers.
+
+* record -> a bag whose messages are exactly the simulator's (events, stamps, frames), whose metadata
+  a ROS 2 Jazzy ``ros2 bag play`` accepts (version 9, cdr, QoS, type hashes equal to the installed
+  message packages');
+* record -> replay round trip, MCAP (output read by ``mcap-ros2-support``) and sqlite3 (output read and
+  decoded by ``rosbags``' own CDR decoder);
+* a bag written by ``rosbags`` alone, on a remapped topic, with garbage of every kind: counted by
+  reason exactly as the node counts them, never a NaN out;
+* the same messages through a real ``EstimatorNode`` over DDS: the same estimates and counters;
+* truncated bags and other unusable input: one line on stderr, exit status 2, no traceback.
+"""
+import json
+import math
+import os
+import random
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+pytest.importorskip("rosbags")
+
+from gpf_nav.ros import conversions as conv  # noqa: E402
+from gpf_nav.ros.bag import BagReader, deserialize  # noqa: E402
+from gpf_nav.ros.params import ESTIMATOR, ParameterError, parameters_from_files, simulator_specs  # noqa: E402
+from gpf_nav.ros.playback import build_events  # noqa: E402
+from gpf_nav.ros.record import record  # noqa: E402
+from gpf_nav.ros.replay import replay  # noqa: E402
+from gpf_nav.ros.simulator_node import EVENT_TOPICS, event_message, scenario_from_parameters  # noqa: E402
+
+S = 1_000_000_000
+ROOT = Path(__file__).resolve().parents[1]
+SIM_SECONDS = 150.0  # simulated seconds of the recorded scenario
+
+
+def _sim_params(**overrides):
+    assignments = [f"scenario.duration:={SIM_SECONDS}"] + [f"{k}:={v}" for k, v in overrides.items()]
+    return parameters_from_files(simulator_specs(), "lunar_simulator", [ROOT / "config/simulator.yaml"], assignments)
+
+
+def _est_params(*assignments):
+    return parameters_from_files(ESTIMATOR, "gpf_estimator", [ROOT / "config/estimator.yaml"], assignments)
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """A recorded scenario bag (MCAP) and the simulator parameters it was made with."""
+    p = _sim_params()
+    path = tmp_path_factory.mktemp("rec") / "scenario"
+    counts = record(str(path), p, "mcap")
+    return path, p, counts
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "gpf_nav.cli", *map(str, args)], capture_output=True, text=True,
+                          timeout=300, cwd=ROOT)
+
+
+def _mcap_messages(bag_dir: Path):
+    """``(topic, schema name, log time, decoded message)`` of an MCAP bag, by mcap-ros2-support."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    (path,) = bag_dir.glob("*.mcap")
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        return [(ch.topic, schema.name, m.log_time, msg)
+                for schema, ch, m, msg in reader.iter_decoded_messages(log_time_order=True)]
+
+
+def _odometry_values(msg):
+    p, v = msg.pose.pose.position, msg.twist.twist.linear
+    return [p.x, p.y, p.z, v.x, v.y, v.z, *msg.pose.covariance, *msg.twist.covariance]
+
+
+# --- record --------------------------------------------------------------------------------------------
+def test_record_writes_the_simulators_messages_with_metadata_ros2_bag_play_accepts(recorded):
+    import yaml
+    path, p, counts = recorded
+    meta = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert meta["version"] == 9 and meta["storage_identifier"] == "mcap"
+    topics = {t["topic_metadata"]["name"]: t for t in meta["topics_with_message_count"]}
+    assert set(topics) == {"/measurements/rae", "/imu", "/truth/odometry", "/clock"}
+    for name, t in topics.items():
+        md = t["topic_metadata"]
+        assert md["serialization_format"] == "cdr"
+        (qos,) = md["offered_qos_profiles"]
+        assert (qos["reliability"], qos["durability"], qos["history"], qos["depth"]) == \
+            ("reliable", "volatile", "keep_last", 50)
+        assert t["message_count"] == counts[name] > 0
+        # the type hash ros2 bag play checks against the installed message package's own description
+        package, _, type_ = md["type"].split("/")
+        description = Path(sys.prefix, "share", package, "msg", f"{type_}.json")
+        if description.exists():
+            assert md["type_description_hash"] in description.read_text()
+
+    # the messages are the simulator node's: same events, stamps (start_time + t), frames and values
+    _, scenario = scenario_from_parameters(p)
+    events = build_events(scenario, p["imu_rate"], p["imu_noise_std"], p["truth_rate"], p["seed"])
+    epoch = int(p["start_time"] * S)
+    expected = {}
+    for e in events:
+        topic, msg = event_message(e, epoch + e.t_ns, p)
+        expected.setdefault("/" + topic, []).append((epoch + e.t_ns, msg))
+    types = {"/" + topic: msg_type for topic, msg_type in EVENT_TOPICS.values()}
+    got = {topic: [] for topic in types}
+    with BagReader(path) as reader:
+        assert reader.start_ns == epoch and reader.end_ns == epoch + int(SIM_SECONDS * S)
+        for topic, t_ns, raw in reader.messages(types):
+            got[topic].append((t_ns, deserialize(raw, types[topic])))
+        clock = [deserialize(raw, __import__("rosgraph_msgs.msg", fromlist=["Clock"]).Clock)
+                 for _, _, raw in reader.messages(["/clock"])]
+    for topic in types:
+        assert len(got[topic]) == len(expected[topic])
+        for (t_got, m_got), (t_exp, m_exp) in zip(got[topic], expected[topic]):
+            assert t_got == t_exp == conv.stamp_to_ns(m_got.header.stamp)
+            assert m_got == m_exp
+    measured = np.array([conv.rae_values(m) for _, m in got["/measurements/rae"]])
+    np.testing.assert_array_equal(measured, scenario.measurements[np.any(np.isfinite(scenario.measurements), 1)])
+    ticks = [conv.stamp_to_ns(c.clock) for c in clock]
+    assert ticks == list(range(epoch, epoch + int(SIM_SECONDS * S) + 1, int(S / p["clock_rate"])))
+
+
+def test_record_refuses_an_existing_bag_and_bad_parameters(tmp_path, recorded):
+    r = _cli("record", recorded[0], "--duration", 10)
+    assert r.returncode == 2 and "exists already" in r.stderr and "Traceback" not in r.stderr
+    r = _cli("record", tmp_path / "x", "-p", "imu_rate:=-1")
+    assert r.returncode == 2 and "imu_rate" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "x").exists()
+
+
+# --- replay --------------------------------------------------------------------------------------------
+def test_round_trip_record_replay_mcap_read_back_by_mcap_ros2_support(recorded, tmp_path):
+    path, p, counts = recorded
+    r = _cli("replay", path, "--out", tmp_path / "out", "--params-file", ROOT / "config/estimator.yaml",
+             "-p", "n_particles:=200", "--no-progress")
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((tmp_path / "out/summary.json").read_text())
+    n_meas = counts["/measurements/rae"]
+    assert summary["particles"] == 200
+    assert summary["inputs"]["/measurements/rae"] == {"read": n_meas, "undecodable": 0, "accepted": n_meas,
+                                                      "rejected": {}}
+    assert summary["inputs"]["/imu"]["accepted"] == counts["/imu"]
+    assert summary["rejected_by_reason"] == {}
+    assert summary["updates"] == n_meas - 10 + 1  # init_window 10: the tenth initialises
+    assert summary["truth"]["compared_updates"] == summary["updates"]
+    for key in ("position_rmse_m", "velocity_rmse_mps", "mean_nees"):
+        assert math.isfinite(summary[key]) and summary[key] > 0
+    assert summary["bag_seconds"] == pytest.approx(SIM_SECONDS)
+    assert summary["real_time_factor"] > 0
+    assert "real time" in r.stdout and "position RMSE" in r.stdout
+    assert (tmp_path / "out/errors.png").stat().st_size > 10_000
+
+    messages = _mcap_messages(tmp_path / "out/estimates")
+    by_topic = {}
+    for topic, schema, log_time, msg in messages:
+        by_topic.setdefault(topic, []).append((schema, log_time, msg))
+    assert {t: len(v) for t, v in by_topic.items()} == summary["outputs"]["messages"]
+    assert {t: v[0][0] for t, v in by_topic.items()} == {
+        "/odometry/filtered": "nav_msgs/msg/Odometry", "/gpf/ess": "std_msgs/msg/Float64",
+        "/gpf/costate": "geometry_msgs/msg/Vector3Stamped", "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray"}
+    odom = by_topic["/odometry/filtered"]
+    stamps = [m.header.stamp.sec * S + m.header.stamp.nanosec for _, _, m in odom]
+    assert all(m.header.frame_id == "moon_inertial" and m.child_frame_id == "base_link" for _, _, m in odom)
+    assert all(math.isfinite(v) for _, _, m in odom for v in _odometry_values(m))
+    assert all(log_time >= stamp for (_, log_time, _), stamp in zip(odom, stamps))  # published after the data
+    # updates at every measurement stamp after initialisation, predictions at publish_rate in between
+    updates = sorted(set(stamps) & {int(p["start_time"] * S) + int(k * 2 * S) for k in range(1, 200)})
+    assert len(updates) == summary["updates"]
+    assert len(odom) > 5 * summary["updates"]
+    assert len(by_topic["/gpf/ess"]) == len(by_topic["/gpf/costate"]) == summary["updates"]
+    last = by_topic["/diagnostics"][-1][2].status[0]
+    values = {kv.key: kv.value for kv in last.values}
+    assert values["measurements accepted"] == str(n_meas) and values["messages rejected"] == "0"
+
+
+def test_round_trip_sqlite3_read_back_by_rosbags(tmp_path):
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+    bag = tmp_path / "scenario"
+    assert _cli("record", bag, "--duration", 60, "--case", "partial", "--seed", 3, "--storage", "sqlite3",
+                "-p", "imu_rate:=2.0").returncode == 0
+    assert list(bag.glob("*.db3"))
+    # the partial case never measures azimuth: no batch initialisation, the prior as initial_state
+    from gpf_nav.scenario import ScenarioConfig, generate
+    prior = generate(ScenarioConfig(duration=60.0, case="partial"), 3)
+    out = tmp_path / "out"
+    r = _cli("replay", bag, "--out", out, "--storage", "sqlite3", "--no-progress", "--no-figure", "-p", "filter:=ekf",
+             "-p", f"initial_state:={[float(v) for v in prior.prior_mean]}",
+             "-p", f"initial_std:={[float(v) for v in np.sqrt(np.diag(prior.prior_cov))]}")
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["filter"] == "ekf" and summary["masked_components"] == 30
+    assert summary["updates"] == 30 and summary["initialized_from"] == "parameters"
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    seen = {}
+    with Reader(out / "estimates") as reader:
+        assert list((out / "estimates").glob("*.db3"))
+        for connection, t_ns, raw in reader.messages():
+            msg = typestore.deserialize_cdr(raw, connection.msgtype)  # rosbags' own CDR decoder
+            seen[connection.topic] = seen.get(connection.topic, 0) + 1
+            if connection.topic == "/odometry/filtered":
+                assert np.all(np.isfinite(msg.pose.covariance)) and math.isfinite(msg.pose.pose.position.x)
+    assert seen == {topic: n for topic, n in summary["outputs"]["messages"].items() if n}
+    assert summary["outputs"]["messages"]["/gpf/ess"] == 0  # the EKF has no ESS, as in the node
+
+
+# --- garbage -------------------------------------------------------------------------------------------
+def _garbage_bag(path: Path, topic: str):
+    """A bag written by rosbags alone: 40 s of scenario measurements on ``topic`` plus IMU, with garbage.
+
+    Returns (expected rejections by reason, expected masked components, undecodable messages)."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+    from gpf_nav.scenario import ScenarioConfig, generate
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    T, H = ts.types["builtin_interfaces/msg/Time"], ts.types["std_msgs/msg/Header"]
+    V3, VS = ts.types["geometry_msgs/msg/Vector3"], ts.types["geometry_msgs/msg/Vector3Stamped"]
+    Q, Imu = ts.types["geometry_msgs/msg/Quaternion"], ts.types["sensor_msgs/msg/Imu"]
+    scenario = generate(ScenarioConfig(duration=40.0), 5)
+    start = 1000 * S
+
+    def rae(stamp_ns, values, frame="station", nanosec=None):
+        stamp = T(sec=stamp_ns // S, nanosec=stamp_ns % S if nanosec is None else nanosec)
+        return ts.serialize_cdr(VS(header=H(stamp=stamp, frame_id=frame), vector=V3(*map(float, values))), VS.__msgtype__)
+
+    def imu(stamp_ns, accel, frame="base_link"):
+        cov = np.zeros(9)
+        cov[[0, 4, 8]] = 1e-8
+        msg = Imu(header=H(stamp=T(sec=stamp_ns // S, nanosec=stamp_ns % S), frame_id=frame),
+                  orientation=Q(0.0, 0.0, 0.0, 1.0), orientation_covariance=np.zeros(9),
+                  angular_velocity=V3(0.0, 0.0, 0.0), angular_velocity_covariance=np.r_[-1.0, np.zeros(8)],
+                  linear_acceleration=V3(*map(float, accel)), linear_acceleration_covariance=cov)
+        return ts.serialize_cdr(msg, Imu.__msgtype__)
+
+    records = []  # (recording time, topic, bytes)
+    for t, y in zip(scenario.times, scenario.measurements):
+        records.append((start + int(t * S), topic, rae(start + int(t * S), y)))
+        records.append((start + int(t * S) - S // 2, "/imu", imu(start + int(t * S) - S // 2, (0.0, 0.0, 0.0))))
+    y0 = scenario.measurements[0]
+    at = start + 21 * S  # recording time of the garbage: after the filter initialised (10 x 2 s)
+    records += [
+        (at, topic, rae(at, (-5.0, y0[1], y0[2]))),                          # non_positive_range
+        (at, topic, rae(at, (math.nan, math.nan, math.nan))),                # no_measured_component
+        (at, topic, rae(at, (math.inf, y0[1], y0[2]))),                      # non_finite
+        (at, topic, rae(at, y0, frame="map")),                               # wrong_frame
+        (at, topic, rae(start + 10 * S, y0)),                                # stale_stamp (out of order)
+        (at, topic, rae(at, y0, nanosec=2_000_000_000)),                     # bad_stamp
+        (at, topic, rae(at + 100 * S, y0)),                                  # future_stamp (max_future 1 s)
+        (at, topic, b"\x00\x01\x00\x00\x07"),                                # does not deserialise
+        (at, topic, rae(at, (y0[0] + 300.0, math.nan, y0[2]))),              # valid, azimuth masked
+        (at, "/imu", imu(at, (math.nan, 0.0, 0.0))),                         # non_finite
+        (at, "/imu", imu(at, (0.0, 0.0, 0.0), frame="imu_link")),            # wrong_frame
+    ]
+    records.sort(key=lambda r: r[0])
+    writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
+    with writer:
+        conns = {topic: writer.add_connection(topic, VS.__msgtype__, typestore=ts),
+                 "/imu": writer.add_connection("/imu", Imu.__msgtype__, typestore=ts)}
+        for t_ns, name, data in records:
+            writer.write(conns[name], t_ns, data)
+    expected = {"non_positive_range": 1, "no_measured_component": 1, "non_finite": 2, "wrong_frame": 2,
+                "stale_stamp": 1, "bad_stamp": 1, "future_stamp": 1}
+    return expected, 1, 1, len(scenario.times)
+
+
+def test_garbage_is_counted_by_reason_like_the_node_and_never_output_as_nan(tmp_path):
+    bag = tmp_path / "garbage"
+    expected, masked, undecodable, n_valid = _garbage_bag(bag, "/tracking/rae")
+    r = _cli("replay", bag, "--out", tmp_path / "out", "--remap", "measurements/rae:=/tracking/rae",
+             "--no-progress")
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((tmp_path / "out/summary.json").read_text())
+    assert summary["rejected_by_reason"] == expected
+    assert summary["undecodable"] == undecodable
+    assert summary["masked_components"] == masked
+    assert summary["inputs"]["/tracking/rae"]["accepted"] == n_valid + 1
+    assert summary["truth"]["messages"] == 0 and "position_rmse_m" not in summary
+    assert not (tmp_path / "out/errors.png").exists()
+    assert "dropped rae message: non_positive_range" in r.stderr  # the node's log line
+    messages = _mcap_messages(tmp_path / "out/estimates")
+    odom = [m for topic, _, _, m in messages if topic == "/odometry/filtered"]
+    assert len(odom) > n_valid
+    assert all(math.isfinite(v) for m in odom for v in _odometry_values(m))
+    assert all(math.isfinite(m.data) for topic, _, _, m in messages if topic == "/gpf/ess")
+    assert all(math.isfinite(c) for topic, _, _, m in messages if topic == "/gpf/costate"
+               for c in (m.vector.x, m.vector.y, m.vector.z))
+    last = {kv.key: kv.value for kv in [m for t, _, _, m in messages if t == "/diagnostics"][-1].status[0].values}
+    for reason, n in expected.items():
+        assert last[f"rejected {reason}"] == str(n)
+    for value in last.values():
+        assert value.lower() != "nan"
+
+
+def test_replay_gives_the_nodes_estimates_and_counters(tmp_path):
+    """The garbage bag's messages published to a real EstimatorNode (use_sim_time) over DDS, one at a time
+    after a /clock at the message's recording time: the node's odometry at every update and its counters
+    equal the replay's."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from geometry_msgs.msg import Vector3Stamped
+    from nav_msgs.msg import Odometry
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import Imu
+    from gpf_nav.ros.estimator_node import EstimatorNode
+    bag = tmp_path / "garbage"
+    expected, _, _, _ = _garbage_bag(bag, "/measurements/rae")
+    params = ["publish_rate:=0.0", "n_particles:=100"]
+    summary, _ = replay(str(bag), str(tmp_path / "out"), _est_params(*params), progress=False)
+    replayed = {}
+    for topic, _, _, m in _mcap_messages(tmp_path / "out/estimates"):
+        if topic == "/odometry/filtered":
+            replayed[conv.stamp_to_ns(m.header.stamp)] = _odometry_values(m)
+
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context, domain_id=random.Random(os.getpid() ^ time.time_ns()).randrange(110, 230))
+    executor = SingleThreadedExecutor(context=context)
+    overrides = [Parameter(k, value=v) for k, v in (("publish_rate", 0.0), ("n_particles", 100),
+                                                     ("use_sim_time", True))]
+    est = EstimatorNode(context=context, parameter_overrides=overrides)
+    probe = rclpy.create_node("gpf_bag_probe", context=context)
+    odom = []
+    probe.create_subscription(Odometry, "odometry/filtered", odom.append, 1000)
+    pubs = {"/measurements/rae": (probe.create_publisher(Vector3Stamped, "measurements/rae", 10), Vector3Stamped),
+            "/imu": (probe.create_publisher(Imu, "imu", 10), Imu)}
+    clock_pub = probe.create_publisher(Clock, "/clock", 10)
+    for node in (est, probe):
+        executor.add_node(node)
+    try:
+        c = est.engine.counters
+
+        def spin_until(condition, timeout=30.0):
+            deadline = time.monotonic() + timeout
+            while not condition() and time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.02)
+            return condition()
+
+        assert spin_until(lambda: all(p.get_subscription_count() for p, _ in pubs.values()))
+        with BagReader(bag) as reader:
+            for topic, t_ns, raw in reader.messages(pubs):
+                clock_pub.publish(Clock(clock=conv.ns_to_stamp(t_ns)))
+                assert spin_until(lambda: est.get_clock().now().nanoseconds == t_ns)
+                pub, msg_type = pubs[topic]
+                try:
+                    msg = deserialize(raw, msg_type)
+                except Exception:  # noqa: BLE001 - the undecodable record never reaches a node
+                    continue
+                before = c.total_accepted + c.total_rejected
+                pub.publish(msg)
+                assert spin_until(lambda: c.total_accepted + c.total_rejected > before)
+        assert spin_until(lambda: len(odom) >= summary["updates"])
+        node_rejected = {r: n for r, n in c.rejected.items() if n}
+    finally:
+        executor.shutdown()
+        est.destroy_node()
+        probe.destroy_node()
+        rclpy.try_shutdown(context=context)
+    assert node_rejected == summary["rejected_by_reason"] == expected
+    node = {conv.stamp_to_ns(m.header.stamp): _odometry_values(m) for m in odom}
+    assert len(node) == summary["updates"]
+    assert set(node) == set(replayed)
+    for stamp in node:
+        np.testing.assert_allclose(node[stamp], replayed[stamp], rtol=1e-12, atol=0)
+
+
+# --- unusable input ------------------------------------------------------------------------------------
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_a_truncated_bag_is_refused_in_one_line_with_status_2(tmp_path, storage):
+    bag = tmp_path / "cut"
+    assert _cli("record", bag, "--duration", 60, "--storage", storage).returncode == 0
+    (data,) = [f for f in bag.iterdir() if f.suffix in (".mcap", ".db3")]
+    with open(data, "r+b") as f:
+        f.truncate(data.stat().st_size // 2)
+    r = _cli("replay", bag, "--out", tmp_path / "out", "--no-progress")
+    assert r.returncode == 2
+    assert "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert r.stderr.startswith("gpf-nav replay: cannot") and str(bag) in r.stderr
+    assert not (tmp_path / "out" / "estimates").exists()
+
+
+def test_unusable_input_is_refused_in_one_line_with_status_2(tmp_path, recorded):
+    path = recorded[0]
+    cases = [
+        (["--remap", "truth/odometry:=/measurements/rae"], "has type geometry_msgs/msg/Vector3Stamped"),
+        (["--remap", "measurements/rae:=/nothing"], "no measurements"),
+        (["-p", "n_particles:=0"], "n_particles"),
+        (["-p", "n_particle:=10"], "unknown parameter"),
+        (["--params-file", ROOT / "config/simulator.yaml"], "no section for gpf_estimator"),
+    ]
+    for extra, text in cases:
+        r = _cli("replay", path, "--out", tmp_path / "out", "--no-progress", *extra)
+        assert r.returncode == 2 and text in r.stderr, (extra, r.stderr)
+        assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+    r = _cli("replay", tmp_path / "no_such_bag", "--out", tmp_path / "out")
+    assert r.returncode == 2 and "no such bag" in r.stderr
+
+
+def test_parameters_from_files_like_the_node(tmp_path):
+    f = tmp_path / "p.yaml"
+    f.write_text("/**:\n  ros__parameters:\n    n_particles: 50\n    use_sim_time: true\n"
+                 "gpf_estimator:\n  ros__parameters:\n    filter: ukf\n    publish_rate: 5\n")
+    p = parameters_from_files(ESTIMATOR, "gpf_estimator", [f], ["filter:=enkf", "initial_state:=[1, 2, 3, 4, 5, 6]"])
+    assert (p["n_particles"], p["filter"], p["publish_rate"]) == (50, "enkf", 5.0)
+    assert p["initial_state"] == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0] and p["seed"] == 0
+    with pytest.raises(ParameterError, match="'n_particles'"):
+        parameters_from_files(ESTIMATOR, "gpf_estimator", [], ["n_particles:=1.5"])
+    with pytest.raises(ParameterError, match="name:=value"):
+        parameters_from_files(ESTIMATOR, "gpf_estimator", [], ["n_particles=5"])
