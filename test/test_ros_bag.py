@@ -30,7 +30,7 @@ from gpf_nav.ros.bag import BagReader, deserialize  # noqa: E402
 from gpf_nav.ros.params import ESTIMATOR, ParameterError, parameters_from_files, simulator_specs  # noqa: E402
 from gpf_nav.ros.playback import build_events  # noqa: E402
 from gpf_nav.ros.record import record  # noqa: E402
-from gpf_nav.ros.replay import replay  # noqa: E402
+from gpf_nav.ros.replay import REPLAY_PARAMETERS, replay  # noqa: E402
 from gpf_nav.ros.simulator_node import EVENT_TOPICS, event_message, scenario_from_parameters  # noqa: E402
 
 S = 1_000_000_000
@@ -44,7 +44,7 @@ def _sim_params(**overrides):
 
 
 def _est_params(*assignments):
-    return parameters_from_files(ESTIMATOR, "gpf_estimator", [ROOT / "config/estimator.yaml"], assignments)
+    return parameters_from_files(REPLAY_PARAMETERS, "gpf_estimator", [ROOT / "config/estimator.yaml"], assignments)
 
 
 @pytest.fixture(scope="module")
@@ -410,3 +410,46 @@ def test_parameters_from_files_like_the_node(tmp_path):
         parameters_from_files(ESTIMATOR, "gpf_estimator", [], ["n_particles:=1.5"])
     with pytest.raises(ParameterError, match="name:=value"):
         parameters_from_files(ESTIMATOR, "gpf_estimator", [], ["n_particles=5"])
+
+
+def test_use_sim_time_takes_the_node_clock_from_the_bags_clock(tmp_path, recorded):
+    """A bag recorded on the wall clock (recording times ~1.7e9 s, stamps and /clock at 1000 s, as
+    ``ros2 bag record`` of the simulator writes it): with use_sim_time the predictions follow /clock; on
+    recording time they cannot (the data are 1.7e9 s old for that clock), as for a node without sim time.
+    The updates are the same either way: header stamps drive the filter."""
+    from gpf_nav.ros.bag import BagWriter, qos_profile
+    from nav_msgs.msg import Odometry
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import Imu
+    from geometry_msgs.msg import Vector3Stamped
+    src, p, _ = recorded
+    shifted = tmp_path / "wall"
+    types = {"/measurements/rae": Vector3Stamped, "/imu": Imu, "/truth/odometry": Odometry, "/clock": Clock}
+    offset = 1_700_000_000 * S
+    end = int(p["start_time"] * S) + 60 * S
+    with BagReader(src) as reader, BagWriter(shifted, "mcap", {t: (m, qos_profile(True, 50))
+                                                              for t, m in types.items()}) as writer:
+        for topic, t_ns, raw in reader.messages(types):
+            if t_ns <= end:
+                writer.write(topic, deserialize(raw, types[topic]), t_ns + offset)
+    results = {}
+    for sim in (False, True):
+        summary, _ = replay(str(shifted), str(tmp_path / f"out{sim}"),
+                            _est_params("n_particles:=100", f"use_sim_time:={str(sim).lower()}"),
+                            progress=False)
+        odom = [(log, conv.stamp_to_ns(m.header.stamp), _odometry_values(m))
+                for topic, _, log, m in _mcap_messages(tmp_path / f"out{sim}/estimates") if topic == "/odometry/filtered"]
+        results[sim] = summary, odom
+    (s_wall, odom_wall), (s_sim, odom_sim) = results[False], results[True]
+    assert s_wall["updates"] == s_sim["updates"] == 30 - 10 + 1
+    assert s_sim["inputs"]["/clock"]["read"] > 0 and "/clock" not in s_wall["inputs"]
+    assert len(odom_wall) == s_wall["updates"]  # no predictions: max_extrapolation from 1.7e9 s
+    assert "no measurement for" in s_wall["diagnostics_last"]["message"]
+    predictions = sorted({stamp for _, stamp, _ in odom_sim} - {stamp for _, stamp, _ in odom_wall})
+    assert len(predictions) > 5 * s_sim["updates"]
+    assert all((stamp - int(p["start_time"] * S)) % (S // 10) == 0 for stamp in predictions)  # the 10 Hz timer on /clock
+    assert all(log >= offset for log, _, _ in odom_sim)  # recorded at recording time
+    updates_wall = {stamp: v for _, stamp, v in odom_wall}
+    updates_sim = {stamp: v for _, stamp, v in odom_sim if stamp in updates_wall}
+    for stamp, values in updates_wall.items():
+        np.testing.assert_array_equal(values, updates_sim[stamp])

@@ -6,10 +6,11 @@ graph and no waiting:
 
 * inputs: the node's topics ``measurements/rae``, ``measurements/range``, ``imu``, ``set_pose``, plus
   ``truth/odometry`` for the evaluation; each remappable (``--remap measurements/rae:=/tracking/rae``);
-* time: header stamps drive the filter, as in the node; the node clock at each message (for the
-  ``future_stamp`` check, ``set_pose`` with a zero stamp) is the message's recording time, and the
-  engine's steady clock (rate limit, ERROR and alarm holds) is that time too, so a bag replays as it was
-  received. The ``publish_rate`` and ``diagnostics_period`` timers tick on it;
+* time: header stamps drive the filter, as in the node. The node clock (the ``future_stamp`` check,
+  ``set_pose`` with a zero stamp, the ``publish_rate`` timer, diagnostics ages) is each message's
+  recording time, or with ``-p use_sim_time:=true`` the bag's ``/clock``, as for a node on simulated
+  time. The steady clock (rate limit, ERROR and alarm holds, the ``diagnostics_period`` timer) is the
+  recording time, so a bag replays as it was received;
 * parameters: ``--params-file`` (e.g. ``config/estimator.yaml``) and ``-p name:=value`` as for the node;
 * outputs: ``DIR/estimates``, a rosbag2 bag of what the node publishes (``/odometry/filtered``,
   ``/gpf/ess``, ``/gpf/costate``, ``/diagnostics``; ``/gpf/particles`` with ``--particles``), recorded at
@@ -34,17 +35,24 @@ from pathlib import Path
 
 import numpy as np
 from nav_msgs.msg import Odometry
+from rosgraph_msgs.msg import Clock
 
 from gpf_nav.ros.bag import (STORAGES, BagError, BagReader, BagWriter, absolute, deserialize, qos_profile,
                              type_name)
 from gpf_nav.ros.conversions import odometry_state, stamp_to_ns
 from gpf_nav.ros.estimator_core import INPUT_TOPICS, OUTPUT_TOPICS, EstimatorCore
-from gpf_nav.ros.params import ESTIMATOR, ParameterError, parameters_from_files
+from gpf_nav.ros.params import ESTIMATOR, ParameterError, Spec, parameters_from_files
 
 TRUTH_TOPIC = "truth/odometry"
+CLOCK_TOPIC = "/clock"
 TRUTH_GAP = 1.0
 """s: truth is interpolated only between samples at most this far apart."""
 OUTPUT_DEPTH = 10  # the node's reliable publishers
+
+
+REPLAY_PARAMETERS = ESTIMATOR + [Spec("use_sim_time", False, "Node clock: the bag's /clock (true) or each "
+                                                              "message's recording time (false).")]
+"""The estimator's parameters plus rclpy's ``use_sim_time``, which the replay honours."""
 
 
 class ReplayError(Exception):
@@ -112,7 +120,7 @@ def _progress(total: int, disable: bool):
     except ImportError:
         return None, plain
     bar = tqdm(total=total, unit="msg", unit_scale=True, mininterval=0.5, file=sys.stderr,
-               desc="replay", dynamic_ncols=True)
+               desc="replay", dynamic_ncols=True, disable=None)  # None: no bar when stderr is not a terminal
     return bar, lambda text: tqdm.write(text, file=sys.stderr)
 
 
@@ -126,9 +134,11 @@ def replay(bag_path: str, out_dir: str, params: dict, remaps: dict | None = None
     """
     remaps = remaps or {}
     name = {topic: remaps.get(absolute(topic), absolute(topic))
-            for topic in [*INPUT_TOPICS, TRUTH_TOPIC, *OUTPUT_TOPICS]}
+            for topic in [*INPUT_TOPICS, TRUTH_TOPIC, CLOCK_TOPIC, *OUTPUT_TOPICS]}
     inputs = {name[t]: (stream, msg_type) for t, (stream, msg_type) in INPUT_TOPICS.items()}
     inputs[name[TRUTH_TOPIC]] = ("truth", Odometry)
+    if params.get("use_sim_time"):
+        inputs[name[CLOCK_TOPIC]] = ("clock", Clock)
     out_dir = Path(out_dir)
     out_bag = out_dir / "estimates"
     with BagReader(bag_path) as reader:
@@ -160,7 +170,9 @@ def _run(reader, out_bag, params, name, present, storage, particles, progress) -
     log = _Log(write_line)
     qos = qos_profile(reliable=True, depth=OUTPUT_DEPTH)
     wanted_outputs = {t: m for t, m in OUTPUT_TOPICS.items() if particles or t != "gpf/particles"}
-    clock = {"now": reader.start_ns, "update": False}
+    sim_time = bool(params.get("use_sim_time"))
+    # rec: recording time (the steady clock and the time outputs are recorded at); node: the node clock
+    clock = {"rec": reader.start_ns, "node": 0 if sim_time else reader.start_ns, "update": False}
     updates: list[tuple[int, np.ndarray, np.ndarray]] = []
     truth: dict[int, np.ndarray] = {}
     read, undecodable, truth_wrong_frame = Counter(), Counter(), 0
@@ -170,39 +182,41 @@ def _run(reader, out_bag, params, name, present, storage, particles, progress) -
         def publish(topic: str, msg) -> None:
             if topic not in wanted_outputs:
                 return
-            writer.write(name[topic], msg, clock["now"])
+            writer.write(name[topic], msg, clock["rec"])
             if topic == "odometry/filtered" and clock["update"]:
                 updates.append((stamp_to_ns(msg.header.stamp), core.engine.mean.copy(), core.engine.cov.copy()))
 
-        core = EstimatorCore(params, publish, log, monotonic=lambda: clock["now"] * 1e-9,
+        core = EstimatorCore(params, publish, log, monotonic=lambda: clock["rec"] * 1e-9,
                              wants_particles=lambda: particles)
-        log.info(core.describe())
-        hardware_id = "/gpf_estimator"
-        publish_period = int(round(1e9 / params["publish_rate"])) if params["publish_rate"] > 0 else 0
-        diag_period = int(round(1e9 * params["diagnostics_period"]))
-        next_publish = reader.start_ns + publish_period
-        next_diag = reader.start_ns + diag_period
+        log.info(core.describe() + (" (node clock: /clock of the bag)" if sim_time else
+                                    " (node clock: recording time)"))
 
-        def timers(until_ns: int) -> None:
-            """Fire the timers due strictly before ``until_ns``, in time order."""
-            nonlocal next_publish, next_diag
+        def diagnostics(t_ns: int) -> None:
+            level, message = core.diagnostics_tick(clock["node"], (t_ns - reader.start_ns) * 1e-9, "/gpf_estimator")
+            last_diag.update(level=level, message=message)
+
+        publish_period = int(round(1e9 / params["publish_rate"])) if params["publish_rate"] > 0 else 0
+        timers = [_Timer(int(round(1e9 * params["diagnostics_period"])), diagnostics, reader.start_ns)]
+        publish_timer = _Timer(publish_period, core.publish_tick, None if sim_time else reader.start_ns)
+        if publish_period and not sim_time:
+            timers.append(publish_timer)
+
+        def run_timers(until_ns: int) -> None:
+            """Fire the recording-time timers due strictly before ``until_ns``, in time order."""
             while True:
-                t_pub = next_publish if publish_period else math.inf
-                t = min(t_pub, next_diag)
-                if t >= until_ns:
+                timer = min(timers, key=lambda x: x.due)
+                if timer.due >= until_ns:
                     return
-                clock["now"] = t
-                if t == t_pub:
-                    core.publish_tick(t)
-                    next_publish += publish_period
-                else:
-                    level, message = core.diagnostics_tick(t, (t - reader.start_ns) * 1e-9, hardware_id)
-                    last_diag.update(level=level, message=message)
-                    next_diag += diag_period
+                clock["rec"] = timer.due
+                if not sim_time:
+                    clock["node"] = timer.due
+                timer.fire(timer.due)
 
         for topic, t_ns, raw in reader.messages(present):
-            timers(t_ns)
-            clock["now"] = t_ns
+            run_timers(t_ns)
+            clock["rec"] = t_ns
+            if not sim_time:
+                clock["node"] = t_ns
             read[topic] += 1
             stream, msg_type = present[topic]
             try:
@@ -212,27 +226,54 @@ def _run(reader, out_bag, params, name, present, storage, particles, progress) -
                 if undecodable[topic] == 1:
                     log.warning(f"dropped a message on {topic} that does not deserialise as {msg_type.__name__}")
                 msg = None
-            if msg is not None:
-                if stream == "truth":
-                    if msg.header.frame_id == params["world_frame"]:
-                        truth[stamp_to_ns(msg.header.stamp)] = odometry_state(msg)
-                    else:
-                        truth_wrong_frame += 1
+            if msg is None:
+                pass
+            elif stream == "clock":
+                clock["node"] = stamp_to_ns(msg.clock)
+                if publish_period and clock["node"]:
+                    publish_timer.step(clock["node"])
+            elif stream == "truth":
+                if msg.header.frame_id == params["world_frame"]:
+                    truth[stamp_to_ns(msg.header.stamp)] = odometry_state(msg)
                 else:
-                    clock["update"] = stream in ("rae", "range")
-                    core.handle(stream, msg, t_ns)
-                    clock["update"] = False
+                    truth_wrong_frame += 1
+            else:
+                clock["update"] = stream in ("rae", "range")
+                core.handle(stream, msg, clock["node"])
+                clock["update"] = False
             if bar is not None:
                 bar.update(1)
-        timers(reader.end_ns + 1)
-        clock["now"] = max(reader.end_ns, clock["now"])
-        level, message = core.diagnostics_tick(clock["now"], (clock["now"] - reader.start_ns) * 1e-9, hardware_id)
-        last_diag.update(level=level, message=message)
+        run_timers(reader.end_ns + 1)
+        clock["rec"] = max(reader.end_ns, clock["rec"])
+        diagnostics(clock["rec"])
     if bar is not None:
         bar.close()
     wall = time.perf_counter() - wall_start
     return _summary(core, reader, name, present, read, undecodable, truth_wrong_frame, updates, truth,
                     writer, storage, wall, last_diag, log)
+
+
+class _Timer:
+    """A node timer of period ``period_ns`` replayed offline, first due one period after ``start_ns``.
+
+    On a continuous clock (recording time) the caller fires every due tick at its own time (:meth:`fire`);
+    on a clock that moves in steps (``/clock`` messages) :meth:`step` fires at most once per step and skips
+    missed periods, as an rcl timer on simulated time does."""
+
+    def __init__(self, period_ns: int, callback, start_ns: int | None):
+        self.period, self.callback = period_ns, callback
+        self.due = math.inf if start_ns is None or not period_ns else start_ns + period_ns
+
+    def fire(self, now_ns: int) -> None:
+        self.callback(now_ns)
+        self.due += self.period
+
+    def step(self, now_ns: int) -> None:
+        if self.due == math.inf:
+            self.due = now_ns + self.period
+        elif now_ns >= self.due:
+            self.callback(now_ns)
+            self.due += self.period * ((now_ns - self.due) // self.period + 1)
 
 
 def truth_at(truth: dict[int, np.ndarray], stamps: np.ndarray, max_gap_ns: int) -> np.ndarray:
@@ -345,7 +386,7 @@ def _print(summary: dict) -> None:
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     try:
-        params = parameters_from_files(ESTIMATOR, "gpf_estimator", args.params_file, args.param)
+        params = parameters_from_files(REPLAY_PARAMETERS, "gpf_estimator", args.params_file, args.param)
         summary, evaluation = replay(args.bag, args.out, params, parse_remaps(args.remap), args.storage,
                                      args.particles, progress=not args.no_progress)
     except (ParameterError, BagError, ReplayError) as err:
