@@ -453,3 +453,15 @@ def test_use_sim_time_takes_the_node_clock_from_the_bags_clock(tmp_path, recorde
     updates_sim = {stamp: v for _, stamp, v in odom_sim if stamp in updates_wall}
     for stamp, values in updates_wall.items():
         np.testing.assert_array_equal(values, updates_sim[stamp])
+
+
+def test_truth_at_interpolates_only_between_close_samples():
+    from gpf_nav.ros.replay_report import truth_at
+    truth = {10 * S: np.arange(6.0), 11 * S: np.arange(6.0) + 2.0, 20 * S: np.zeros(6)}
+    stamps = np.array([9 * S, 10 * S, 10 * S + S // 4, 11 * S, 15 * S, 20 * S, 21 * S], dtype=np.int64)
+    out = truth_at(truth, stamps, S)
+    assert np.isnan(out[[0, 4, 6]]).all()
+    np.testing.assert_allclose(out[1], np.arange(6.0))
+    np.testing.assert_allclose(out[2], np.arange(6.0) + 0.5)
+    np.testing.assert_allclose(out[3], np.arange(6.0) + 2.0)
+    np.testing.assert_allclose(out[5], np.zeros(6))
