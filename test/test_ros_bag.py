@@ -378,7 +378,7 @@ def test_a_truncated_bag_is_refused_in_one_line_with_status_2(tmp_path, storage)
     r = _cli("replay", bag, "--out", tmp_path / "out", "--no-progress")
     assert r.returncode == 2
     assert "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
-    assert r.stderr.startswith("gpf-nav replay: cannot") and str(bag) in r.stderr
+    assert r.stderr.startswith("gpf-nav replay: error: cannot") and str(bag) in r.stderr
     assert not (tmp_path / "out" / "estimates").exists()
 
 

@@ -93,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         counts = record(args.out, simulator_parameters(args), args.storage)
     except (ParameterError, BagError) as err:
-        print(f"gpf-nav record: {err}", file=sys.stderr)
+        print(f"gpf-nav record: error: {err}", file=sys.stderr)
         return 2
     listing = ", ".join(f"{topic} {n}" for topic, n in counts.items())
     print(f"gpf-nav record: wrote {args.out} ({args.storage}) in {time.perf_counter() - start:.1f} s: {listing}")

@@ -282,7 +282,7 @@ def main(argv: list[str] | None = None) -> int:
         summary, evaluation = replay(args.bag, args.out, params, parse_remaps(args.remap), args.storage,
                                      args.particles, progress=not args.no_progress)
     except (ParameterError, BagError, ReplayError) as err:
-        print(f"gpf-nav replay: {err}", file=sys.stderr)
+        print(f"gpf-nav replay: error: {err}", file=sys.stderr)
         return 2
     out = Path(args.out)
     if evaluation is not None and not args.no_figure:
