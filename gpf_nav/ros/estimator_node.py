@@ -1,8 +1,9 @@
 """``ros2 run gpf_nav estimator``: the GPF (or a baseline filter) as a ROS 2 navigation node.
 
 A thin adapter around :class:`gpf_nav.ros.estimator_core.EstimatorCore` (message checks, the
-engine, output messages; shared with ``gpf-nav replay``): subscriptions, publishers, timers on the node
-clock, the ``~/reset`` service and the live parameters. Topics, parameters, frames and the bad-input rules are documented in ``docs/ros.md``.
+engine, output messages; shared with ``gpf-nav replay``): subscriptions, publishers, timers on the
+node clock, the ``~/reset`` service and the live parameters. Topics, parameters, frames and the
+bad-input rules are documented in ``docs/ros.md``.
 """
 from __future__ import annotations
 
