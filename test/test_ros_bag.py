@@ -465,3 +465,20 @@ def test_truth_at_interpolates_only_between_close_samples():
     np.testing.assert_allclose(out[2], np.arange(6.0) + 0.5)
     np.testing.assert_allclose(out[3], np.arange(6.0) + 2.0)
     np.testing.assert_allclose(out[5], np.zeros(6))
+
+
+def test_header_stamp_read_from_the_cdr_bytes():
+    from rclpy.serialization import serialize_message
+    from rosbags.typesys import Stores, get_typestore
+    from gpf_nav.ros.bag import header_stamp_ns
+    stamp = 1234 * S + 567
+    odom = conv.odometry_msg(np.arange(6.0), np.eye(6), stamp, "moon_inertial", "base_link")
+    assert header_stamp_ns(serialize_message(odom)) == stamp
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    VS, H, T, V3 = (ts.types[t] for t in ("geometry_msgs/msg/Vector3Stamped", "std_msgs/msg/Header",
+                                          "builtin_interfaces/msg/Time", "geometry_msgs/msg/Vector3"))
+    msg = VS(header=H(stamp=T(sec=1234, nanosec=567), frame_id="x"), vector=V3(1.0, 2.0, 3.0))
+    for little in (True, False):
+        assert header_stamp_ns(ts.serialize_cdr(msg, VS.__msgtype__, little_endian=little)) == stamp
+    with pytest.raises(ValueError):
+        header_stamp_ns(b"\x00\x01\x00\x00")

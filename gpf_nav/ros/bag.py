@@ -10,6 +10,7 @@ Every failure to open or read a bag is raised as :class:`BagError` with a one-li
 """
 from __future__ import annotations
 
+import struct
 from functools import lru_cache
 from pathlib import Path
 from typing import Iterator
@@ -151,6 +152,15 @@ class BagReader:
 def deserialize(raw: bytes, msg_type):
     """The rclpy message of class ``msg_type`` in ``raw`` (raises on malformed data)."""
     return deserialize_message(bytes(raw), msg_type)
+
+
+def header_stamp_ns(raw) -> int:
+    """The ``header.stamp`` [ns] of a serialised message that starts with a ``std_msgs/Header`` (every
+    stamped type), read from the CDR bytes without decoding the rest; ValueError when too short."""
+    if len(raw) < 12:
+        raise ValueError("shorter than a CDR header stamp")
+    sec, nanosec = struct.unpack_from("<iI" if raw[1] & 1 else ">iI", raw, 4)  # byte 1: little endian
+    return sec * 1_000_000_000 + nanosec
 
 
 def _one_line(err: Exception) -> str:

@@ -37,8 +37,8 @@ import numpy as np
 from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
 
-from gpf_nav.ros.bag import (STORAGES, BagError, BagReader, BagWriter, absolute, deserialize, qos_profile,
-                             type_name)
+from gpf_nav.ros.bag import (STORAGES, BagError, BagReader, BagWriter, absolute, deserialize,
+                             header_stamp_ns, qos_profile, type_name)
 from gpf_nav.ros.conversions import odometry_state, stamp_to_ns
 from gpf_nav.ros.estimator_core import INPUT_TOPICS, OUTPUT_TOPICS, EstimatorCore
 from gpf_nav.ros.params import ESTIMATOR, ParameterError, Spec, parameters_from_files
@@ -163,7 +163,7 @@ def replay(bag_path: str, out_dir: str, params: dict, remaps: dict | None = None
 
 
 def _run(reader, out_bag, params, name, present, storage, particles, progress) -> tuple[dict, tuple | None]:
-    wall_start = time.perf_counter()
+    wall_start, cpu_start = time.perf_counter(), time.process_time()
     total = sum(reader.counts[t] for t in present)
     bar, write_line = _progress(total, disable=not progress)
     log = _Log(write_line)
@@ -173,8 +173,8 @@ def _run(reader, out_bag, params, name, present, storage, particles, progress) -
     # rec: recording time (the steady clock and the time outputs are recorded at); node: the node clock
     clock = {"rec": reader.start_ns, "node": 0 if sim_time else reader.start_ns, "update": False}
     updates: list[tuple[int, np.ndarray, np.ndarray]] = []
-    truth: dict[int, np.ndarray] = {}
-    read, undecodable, truth_wrong_frame = Counter(), Counter(), 0
+    truth_raw: dict[int, bytes] = {}
+    read, undecodable = Counter(), Counter()
     last_diag = {"level": None, "message": "none published"}
 
     with BagWriter(out_bag, storage, {name[t]: (m, qos) for t, m in wanted_outputs.items()}) as writer:
@@ -218,28 +218,30 @@ def _run(reader, out_bag, params, name, present, storage, particles, progress) -
                 clock["node"] = t_ns
             read[topic] += 1
             stream, msg_type = present[topic]
-            try:
-                msg = deserialize(raw, msg_type)
-            except Exception:  # noqa: BLE001 - a corrupt record is dropped and counted
-                undecodable[topic] += 1
-                if undecodable[topic] == 1:
-                    log.warning(f"dropped a message on {topic} that does not deserialise as {msg_type.__name__}")
-                msg = None
-            if msg is None:
-                pass
-            elif stream == "clock":
-                clock["node"] = stamp_to_ns(msg.clock)
-                if publish_period and clock["node"]:
-                    publish_timer.step(clock["node"])
-            elif stream == "truth":
-                if msg.header.frame_id == params["world_frame"]:
-                    truth[stamp_to_ns(msg.header.stamp)] = odometry_state(msg)
-                else:
-                    truth_wrong_frame += 1
+            if stream == "truth":  # decoded after the loop, only around the updates (truth is dense)
+                try:
+                    truth_raw[header_stamp_ns(raw)] = raw
+                except ValueError:
+                    undecodable[topic] += 1
             else:
-                clock["update"] = stream in ("rae", "range")
-                core.handle(stream, msg, clock["node"])
-                clock["update"] = False
+                try:
+                    msg = deserialize(raw, msg_type)
+                except Exception:  # noqa: BLE001 - a corrupt record is dropped and counted
+                    undecodable[topic] += 1
+                    if undecodable[topic] == 1:
+                        log.warning(f"dropped a message on {topic} that does not deserialise as "
+                                    f"{msg_type.__name__}")
+                    msg = None
+                if msg is None:
+                    pass
+                elif stream == "clock":
+                    clock["node"] = stamp_to_ns(msg.clock)
+                    if publish_period and clock["node"]:
+                        publish_timer.step(clock["node"])
+                else:
+                    clock["update"] = stream in ("rae", "range")
+                    core.handle(stream, msg, clock["node"])
+                    clock["update"] = False
             if bar is not None:
                 bar.update(1)
         run_timers(reader.end_ns + 1)
@@ -247,9 +249,32 @@ def _run(reader, out_bag, params, name, present, storage, particles, progress) -
         diagnostics(clock["rec"])
     if bar is not None:
         bar.close()
-    wall = time.perf_counter() - wall_start
+    truth, truth_wrong_frame = _decode_truth(truth_raw, [u[0] for u in updates], params["world_frame"],
+                                             undecodable, name[TRUTH_TOPIC])
+    wall, cpu = time.perf_counter() - wall_start, time.process_time() - cpu_start
     return summarize(core, reader, name, present, read, undecodable, truth_wrong_frame, updates, truth,
-                     writer, storage, wall, last_diag, log)
+                     len(truth_raw), writer, storage, wall, cpu, last_diag, log)
+
+
+def _decode_truth(raw: dict[int, bytes], stamps, world_frame: str, undecodable: Counter,
+                  topic: str) -> tuple[dict[int, np.ndarray], int]:
+    """States ``(6,)`` by stamp of the truth messages ``raw`` (serialised, by stamp) that bracket
+    ``stamps``; also how many of those are in another frame than ``world_frame`` (not used)."""
+    t = np.array(sorted(raw), dtype=np.int64)
+    i = np.searchsorted(t, np.asarray(stamps, dtype=np.int64))
+    wanted = np.unique(np.concatenate([i - 1, i]).clip(0, len(t) - 1)) if len(t) else []
+    truth, wrong_frame = {}, 0
+    for k in t[wanted].tolist():
+        try:
+            msg = deserialize(raw[k], Odometry)
+        except Exception:  # noqa: BLE001
+            undecodable[topic] += 1
+            continue
+        if msg.header.frame_id != world_frame:
+            wrong_frame += 1
+        else:
+            truth[stamp_to_ns(msg.header.stamp)] = odometry_state(msg)
+    return truth, wrong_frame
 
 
 class _Timer:

@@ -32,8 +32,8 @@ def truth_at(truth: dict[int, np.ndarray], stamps: np.ndarray, max_gap_ns: int) 
     return out
 
 
-def summarize(core, reader, name, present, read, undecodable, truth_wrong_frame, updates, truth, writer,
-              storage, wall, last_diag, log) -> tuple[dict, tuple | None]:
+def summarize(core, reader, name, present, read, undecodable, truth_wrong_frame, updates, truth, truth_read,
+              writer, storage, wall, cpu, last_diag, log) -> tuple[dict, tuple | None]:
     """The replay's summary dict and, when truth covers some updates, ``(times (K,) s since the first
     compared update, errors (K, 6), filter standard deviations (K, 6))`` for the figure.
 
@@ -66,7 +66,9 @@ def summarize(core, reader, name, present, read, undecodable, truth_wrong_frame,
         "outputs": {"bag": str(writer.path), "storage": storage,
                     "messages": writer.counts},
         "bag_seconds": span, "wall_seconds": wall, "real_time_factor": span / wall if wall > 0 else None,
-        "truth": {"topic": name["truth/odometry"], "messages": len(truth), "wrong_frame": truth_wrong_frame},
+        "cpu_seconds": cpu, "real_time_factor_cpu": span / cpu if cpu > 0 else None,
+        "truth": {"topic": name["truth/odometry"], "messages": truth_read, "decoded": len(truth),
+                  "wrong_frame": truth_wrong_frame},
     }
     stamps = np.array([u[0] for u in updates], dtype=np.int64)
     ref = truth_at(truth, stamps, int(TRUTH_GAP * 1e9))
@@ -91,10 +93,12 @@ def summarize(core, reader, name, present, read, undecodable, truth_wrong_frame,
 
 
 def print_summary(summary: dict) -> None:
-    rtf = summary["real_time_factor"]
+    def factor(value):
+        return "n/a" if not value else f"{value:.0f}x"
     print(f"gpf-nav replay: {summary['filter']} N={summary['particles']} over {summary['bag']}: "
           f"{summary['bag_seconds']:.1f} s of data in {summary['wall_seconds']:.2f} s wall, "
-          f"{'n/a' if rtf is None else f'{rtf:.0f}x'} real time")
+          f"{factor(summary['real_time_factor'])} real time ({summary['cpu_seconds']:.2f} s of CPU: "
+          f"{factor(summary['real_time_factor_cpu'])})")
     print(f"  {'input topic':28} {'read':>8} {'accepted':>9} {'rejected':>9} {'undecodable':>12}")
     for topic, row in summary["inputs"].items():
         rejected = sum(row.get("rejected", {}).values())
