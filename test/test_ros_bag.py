@@ -162,7 +162,8 @@ def test_round_trip_record_replay_mcap_read_back_by_mcap_ros2_support(recorded, 
     assert {t: len(v) for t, v in by_topic.items()} == summary["outputs"]["messages"]
     assert {t: v[0][0] for t, v in by_topic.items()} == {
         "/odometry/filtered": "nav_msgs/msg/Odometry", "/gpf/ess": "std_msgs/msg/Float64",
-        "/gpf/costate": "geometry_msgs/msg/Vector3Stamped", "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray"}
+        "/gpf/costate": "geometry_msgs/msg/Vector3Stamped", "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+        "/gpf/unmodelled_acceleration": "geometry_msgs/msg/Vector3Stamped"}
     odom = by_topic["/odometry/filtered"]
     stamps = [m.header.stamp.sec * S + m.header.stamp.nanosec for _, _, m in odom]
     assert all(m.header.frame_id == "moon_inertial" and m.child_frame_id == "base_link" for _, _, m in odom)
@@ -173,6 +174,7 @@ def test_round_trip_record_replay_mcap_read_back_by_mcap_ros2_support(recorded, 
     assert len(updates) == summary["updates"]
     assert len(odom) > 5 * summary["updates"]
     assert len(by_topic["/gpf/ess"]) == len(by_topic["/gpf/costate"]) == summary["updates"]
+    assert len(by_topic["/gpf/unmodelled_acceleration"]) == summary["updates"]
     last = by_topic["/diagnostics"][-1][2].status[0]
     values = {kv.key: kv.value for kv in last.values}
     assert values["measurements accepted"] == str(n_meas) and values["messages rejected"] == "0"
@@ -287,8 +289,8 @@ def test_garbage_is_counted_by_reason_like_the_node_and_never_output_as_nan(tmp_
     assert len(odom) > n_valid
     assert all(math.isfinite(v) for m in odom for v in _odometry_values(m))
     assert all(math.isfinite(m.data) for topic, _, _, m in messages if topic == "/gpf/ess")
-    assert all(math.isfinite(c) for topic, _, _, m in messages if topic == "/gpf/costate"
-               for c in (m.vector.x, m.vector.y, m.vector.z))
+    assert all(math.isfinite(c) for topic, _, _, m in messages
+               if topic in ("/gpf/costate", "/gpf/unmodelled_acceleration") for c in (m.vector.x, m.vector.y, m.vector.z))
     last = {kv.key: kv.value for kv in [m for t, _, _, m in messages if t == "/diagnostics"][-1].status[0].values}
     for reason, n in expected.items():
         assert last[f"rejected {reason}"] == str(n)

@@ -13,7 +13,8 @@ graph and no waiting:
   recording time, so a bag replays as it was received;
 * parameters: ``--params-file`` (e.g. ``config/estimator.yaml``) and ``-p name:=value`` as for the node;
 * outputs: ``DIR/estimates``, a rosbag2 bag of what the node publishes (``/odometry/filtered``,
-  ``/gpf/ess``, ``/gpf/costate``, ``/diagnostics``; ``/gpf/particles`` with ``--particles``), each
+  ``/gpf/ess``, ``/gpf/costate``, ``/gpf/unmodelled_acceleration``, ``/diagnostics``;
+  ``/gpf/particles`` with ``--particles``), each
   recorded at the recording time of the message or timer tick that produced it; ``DIR/summary.json``, printed too; ``DIR/errors.png``
   (per-axis error and 3-sigma bounds) when the bag has truth.
 
