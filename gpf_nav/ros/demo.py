@@ -9,25 +9,28 @@ message), mean ESS and the messages processed. All traffic goes over DDS, so set
 """
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import time
 
 import numpy as np
 
+from gpf_nav.cli import CommandParser, positive_float, positive_int
+from gpf_nav.ros.factory import FILTERS, make_filter
+from gpf_nav.scenario import ScenarioConfig, filter_model
 
-def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="gpf-nav demo", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--filter", default="gpf", help="gpf | spf | ekf | ukf | enkf (default gpf)")
-    ap.add_argument("--particles", type=int, default=500, help="N (default 500)")
-    ap.add_argument("--duration", type=float, default=300.0, help="simulated seconds (default 300)")
-    ap.add_argument("--rate-factor", type=float, default=20.0, help="simulated s per wall s (default 20)")
+
+def _parser() -> CommandParser:
+    ap = CommandParser(prog="gpf-nav demo", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--filter", default="gpf", choices=FILTERS, help="gpf | spf | ekf | ukf | enkf (default gpf)")
+    ap.add_argument("--particles", type=positive_int, default=500, help="N (default 500)")
+    ap.add_argument("--duration", type=positive_float, default=300.0, help="simulated seconds (default 300)")
+    ap.add_argument("--rate-factor", type=positive_float, default=20.0, help="simulated s per wall s (default 20)")
     ap.add_argument("--seed", type=int, default=0, help="scenario seed (default 0)")
     ap.add_argument("--case", default="full", choices=("full", "partial"), help="measurement case")
     ap.add_argument("--init", default="prior", choices=("prior", "measurements"),
                     help="initialise from the scenario prior (parameters) or from the first measurements")
-    ap.add_argument("--timeout", type=float, default=None, help="wall-clock limit, s (default: generous)")
+    ap.add_argument("--timeout", type=positive_float, default=None, help="wall-clock limit, s (default: generous)")
     ap.add_argument("--json", action="store_true", help="print the summary as JSON")
     return ap
 
@@ -157,6 +160,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.case == "partial" and args.init == "measurements":
         parser.error("--init measurements needs range, azimuth and elevation (--case full); "
                      "the partial case never measures azimuth")
+    try:  # the estimator's own check of the filter options, before anything starts
+        make_filter(args.filter, filter_model(ScenarioConfig()), n_particles=args.particles)
+    except ValueError as err:
+        parser.error(str(err))
     summary = run(args)
     if args.json:
         print(json.dumps(summary, indent=2))
