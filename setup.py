@@ -21,7 +21,8 @@ setup(
         # ROS 2 Jazzy Python client from PyPI, for machines without a system ROS installation.
         "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces"],
         "experiments": ["matplotlib", "tqdm", "dask[distributed]"],
-        "test": ["pytest", "hypothesis", "colcon-core", "colcon-ros"],
+        "test": ["pytest", "hypothesis", "wheel", "colcon-core", "colcon-ros", "colcon-package-selection",
+                 "colcon-bash"],
     },
     zip_safe=True,
     maintainer="gpf_nav maintainers",
