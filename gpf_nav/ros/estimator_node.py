@@ -18,7 +18,6 @@ from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped, Vector3Stamp
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Imu, Range
@@ -29,6 +28,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from gpf_nav.allocator import retain_freed_memory
 from gpf_nav.ros import conversions as conv
 from gpf_nav.ros import diagnostics as diag
+from gpf_nav.ros import shutdown
 from gpf_nav.ros import validation as val
 from gpf_nav.ros.engine import EngineConfig, EstimatorEngine
 from gpf_nav.ros.factory import FILTERS, make_filter, make_lunar_model
@@ -411,9 +411,10 @@ class EstimatorNode(Node):
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Console script ``estimator``: returns 2 (after a FATAL log line) on invalid parameters."""
+    """Console script ``estimator``: returns 2 (after a FATAL log line) on invalid parameters, 0 when
+    stopped by SIGINT or SIGTERM (:mod:`gpf_nav.ros.shutdown`)."""
     retain_freed_memory()
-    rclpy.init(args=sys.argv if argv is None else argv)
+    stop = shutdown.init_without_signal_handlers(sys.argv if argv is None else argv)
     try:
         node = EstimatorNode()
     except (ParameterError, rclpy.exceptions.InvalidParameterTypeException,
@@ -422,12 +423,9 @@ def main(argv: list[str] | None = None) -> int:
         rclpy.try_shutdown()
         return 2
     try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        shutdown.spin_until(node, stop)
     finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+        shutdown.close(node)
     return 0
 
 

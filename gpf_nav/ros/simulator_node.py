@@ -20,13 +20,13 @@ import rclpy.logging
 from geometry_msgs.msg import Vector3Stamped
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Imu
 
 from gpf_nav.ros import conversions as conv
+from gpf_nav.ros import shutdown
 from gpf_nav.ros.params import ParameterError, declare, simulator_specs
 from gpf_nav.ros.playback import NS, build_events
 
@@ -168,8 +168,9 @@ class SimulatorNode(Node):
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Console script ``simulator``: exits 0 at the end of the trajectory, 2 on invalid parameters."""
-    rclpy.init(args=sys.argv if argv is None else argv)
+    """Console script ``simulator``: exits 0 at the end of the trajectory (unless ``loop``) and when
+    stopped by SIGINT or SIGTERM (:mod:`gpf_nav.ros.shutdown`), 2 on invalid parameters."""
+    stop = shutdown.init_without_signal_handlers(sys.argv if argv is None else argv)
     try:
         node = SimulatorNode()
     except (ParameterError, rclpy.exceptions.InvalidParameterTypeException,
@@ -178,16 +179,11 @@ def main(argv: list[str] | None = None) -> int:
         rclpy.try_shutdown()
         return 2
     try:
-        while rclpy.ok() and not node.finished:
-            rclpy.spin_once(node, timeout_sec=0.1)
+        shutdown.spin_until(node, stop, done=lambda: node.finished)
         linger = time.monotonic() + 1.0  # let reliable subscribers receive the last messages
-        while rclpy.ok() and time.monotonic() < linger:
-            rclpy.spin_once(node, timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        shutdown.spin_until(node, stop, done=lambda: time.monotonic() > linger)
     finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+        shutdown.close(node)
     return 0
 
 
