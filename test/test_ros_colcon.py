@@ -131,7 +131,7 @@ def test_installed_simulator_and_estimator_processes_track_truth(workspace):
     est_log = open(logs / "estimator.log", "w")
     sim_log = open(logs / "simulator.log", "w")
     est = subprocess.Popen([str(lib / "estimator"), "--ros-args", "--params-file", str(share / "estimator.yaml"),
-                            "-p", "use_sim_time:=true", "-p", "n_particles:=300"],
+                            "-p", "use_sim_time:=true", "-p", "n_particles:=300", "-p", "queue_depth:=200"],
                            env=env, cwd=workspace, stdout=est_log, stderr=subprocess.STDOUT)
     sim = None
     try:
@@ -141,19 +141,18 @@ def test_installed_simulator_and_estimator_processes_track_truth(workspace):
             executor.spin_once(timeout_sec=0.1)
         sim = subprocess.Popen([str(lib / "simulator"), "--ros-args", "--params-file", str(share / "simulator.yaml"),
                                 "-p", "rate_factor:=25.0", "-p", "scenario.duration:=120.0",
-                                "-p", "start_delay:=2.0"],
+                                "-p", "start_delay:=2.0", "-p", "truth_rate:=0.0", "-p", "imu_rate:=0.0"],
                                env=env, cwd=workspace, stdout=sim_log, stderr=subprocess.STDOUT)
-        deadline = time.monotonic() + 120.0
-        while time.monotonic() < deadline and sim.poll() is None:
-            executor.spin_once(timeout_sec=0.05)
-        end = time.monotonic() + 1.0
-        while time.monotonic() < end:
+        # queues deeper than the run (60 measurements, truth only at their stamps): a busy machine delays
+        # messages but sheds none, so wait for the estimates rather than for a duration
+        deadline = time.monotonic() + 240.0
+        while time.monotonic() < deadline and (sim.poll() is None or len(set(odom) & set(truth)) < 50):
             executor.spin_once(timeout_sec=0.05)
         assert sim.returncode == 0, (logs / "simulator.log").read_text()
         assert "trajectory ended" in (logs / "simulator.log").read_text()
         assert est.poll() is None, (logs / "estimator.log").read_text()
         common = sorted(set(odom) & set(truth))
-        assert len(common) >= 30, (len(odom), len(truth), (logs / "estimator.log").read_text())
+        assert len(common) >= 50, (len(odom), len(truth), (logs / "estimator.log").read_text())
         err = np.array([np.linalg.norm(odom[k][:3] - truth[k][:3]) for k in common])
         assert np.all(np.isfinite(err)) and np.median(err) < 5e3 and err.max() < 25e3, err
     finally:

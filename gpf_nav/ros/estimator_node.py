@@ -161,6 +161,9 @@ class EstimatorNode(Node):
         self.create_subscription(Imu, "imu", self._guard("imu", self._on_imu), sensor_qos)
         self.create_subscription(PoseWithCovarianceStamped, "set_pose", self._guard("set_pose", self._on_set_pose),
                                  reliable)
+        handover = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=1,
+                              durability=DurabilityPolicy.TRANSIENT_LOCAL)  # a late joiner gets the last one
+        self.create_subscription(Odometry, "set_state", self._guard("set_state", self._on_set_state), handover)
         self.odom_pub = self.create_publisher(Odometry, "odometry/filtered", reliable)
         self.ess_pub = self.create_publisher(Float64, "gpf/ess", reliable)
         self.costate_pub = self.create_publisher(Vector3Stamped, "gpf/costate", reliable)
@@ -176,7 +179,7 @@ class EstimatorNode(Node):
             f"{self.filter_name} estimator up: N={p['n_particles']}, world_frame={p['world_frame']}, "
             f"initialisation from "
             + ("parameters" if p["initial_state"] is not None else
-               f"set_pose or the first {p['init_window']} measurements"))
+               f"set_state, set_pose or the first {p['init_window']} measurements"))
 
     # --- parameters ------------------------------------------------------------------------------------
     def _filter_options(self) -> dict:
@@ -330,13 +333,39 @@ class EstimatorNode(Node):
         if not ok:
             self._refuse("set_pose", reason, f"position ({pos.x}, {pos.y}, {pos.z}) or covariance")
             return
-        if not np.any(cov) or np.linalg.eigvalsh(0.5 * (cov + cov.T)).min() <= 0.0:
-            cov = None  # not given or not positive definite: initial_std
-        ok, reason = self.engine.set_pose(stamp, np.array([pos.x, pos.y, pos.z]), cov, self._now_ns())
-        if not ok:
-            self._refuse("set_pose", reason, self._timing_detail(stamp), counted=True)
+        ok, reason = self.engine.set_pose(stamp, np.array([pos.x, pos.y, pos.z]), _positive_definite(cov),
+                                          self._now_ns())
+        self._initialized_from("set_pose", stamp, ok, reason)
+
+    def _on_set_state(self, msg: Odometry) -> None:
+        stamp = self._check_header("set_state", msg.header, self.params["world_frame"])
+        if stamp is None:
             return
-        self.get_logger().info(f"initialised from set_pose at {stamp * 1e-9:.3f} s")
+        if stamp == 0:
+            stamp = self._now_ns()
+        state = conv.odometry_state(msg)
+        pos_cov = conv.position_covariance(msg.pose.covariance)
+        vel_cov = conv.position_covariance(msg.twist.covariance)  # the linear block, as for the pose
+        ok, reason = val.check_finite(*state, *pos_cov.reshape(-1), *vel_cov.reshape(-1))
+        if not ok:
+            self._refuse("set_state", reason, f"state {state.tolist()} or covariance")
+            return
+        m = self.model
+        p, v = list(m.position_index), list(m.velocity_index)
+        mean = np.zeros(m.state_dim)
+        mean[p], mean[v] = state[:3], state[3:]
+        cov = np.diag(np.asarray(self.params["initial_std"]) ** 2)
+        for index, block in ((p, _positive_definite(pos_cov)), (v, _positive_definite(vel_cov))):
+            if block is not None:
+                cov[np.ix_(index, index)] = block
+        ok, reason = self.engine.set_state(stamp, mean, cov, self._now_ns())
+        self._initialized_from("set_state", stamp, ok, reason)
+
+    def _initialized_from(self, stream: str, stamp: int, ok: bool, reason: str) -> None:
+        if not ok:
+            self._refuse(stream, reason, self._timing_detail(stamp), counted=True)
+            return
+        self.get_logger().info(f"initialised from {stream} at {stamp * 1e-9:.3f} s")
         self._publish(stamp, self.engine.mean, self.engine.cov, update=False)
 
     def _on_reset(self, request, response):
@@ -408,6 +437,13 @@ class EstimatorNode(Node):
             if t - self._last_log.get("_not_initialized", -math.inf) >= LOG_THROTTLE:
                 self._last_log["_not_initialized"] = t
                 self.get_logger().warning(f"filter not initialised: no odometry yet; {self.engine.waiting_for()}")
+
+
+def _positive_definite(cov: np.ndarray) -> np.ndarray | None:
+    """``cov`` if it is positive definite, else None (not given, or unusable: ``initial_std`` applies)."""
+    if not np.any(cov) or np.linalg.eigvalsh(0.5 * (cov + cov.T)).min() <= 0.0:
+        return None
+    return cov
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -5,7 +5,9 @@ Generates the truth with the core scenario generator (or replays a CSV truth, pa
 ``/clock``. A wall-clock loop at ``clock_rate`` Hz advances simulated time by ``rate_factor`` times
 the elapsed wall time, publishes ``/clock`` and releases every event of :mod:`gpf_nav.ros.playback`
 due by then, with the event's own stamp; so message contents never depend on timing: same seed, same
-messages. See ``docs/ros.md``.
+messages. By default simulated time starts at the wall-clock time (``start_time`` negative), so at
+``rate_factor`` 1 an estimator on the wall clock accepts the stamps, and the mission's prior is handed
+over on ``set_state`` (latched) when the trajectory starts. See ``docs/ros.md``.
 """
 from __future__ import annotations
 
@@ -21,7 +23,7 @@ from geometry_msgs.msg import Vector3Stamped
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Imu
 
@@ -47,9 +49,11 @@ def scenario_from_parameters(p: dict):
 
 def check_simulator_parameters(p: dict) -> list[str]:
     errors = []
-    for key in ("imu_rate", "truth_rate", "imu_noise_std", "start_time", "start_delay"):
+    for key in ("imu_rate", "truth_rate", "imu_noise_std", "start_delay"):
         if not (math.isfinite(p[key]) and p[key] >= 0):
             errors.append(f"parameter '{key}' = {p[key]!r} must be >= 0")
+    if not math.isfinite(p["start_time"]):
+        errors.append(f"parameter 'start_time' = {p['start_time']!r} must be finite (negative: the wall-clock time)")
     for key in ("clock_rate", "rate_factor"):
         if not (math.isfinite(p[key]) and p[key] > 0):
             errors.append(f"parameter '{key}' = {p[key]!r} must be positive")
@@ -66,7 +70,7 @@ class SimulatorNode(Node):
         finished: True once the trajectory has ended and ``loop`` is false.
         trajectory_ns: trajectory time reached by the release loop in the current lap [ns] (0 before
             the start).
-        published: messages published per kind (``measurement``, ``imu``, ``truth``, ``clock``).
+        published: messages published per kind (``measurement``, ``imu``, ``truth``, ``clock``, ``handover``).
     """
 
     def __init__(self, name: str = NODE_NAME, **kwargs):
@@ -87,20 +91,24 @@ class SimulatorNode(Node):
             if len(self.scenario.times) > 1 else NS
         self.finished = False
         self.trajectory_ns = 0
-        self.published = {"measurement": 0, "imu": 0, "truth": 0, "clock": 0}
+        self.published = {"measurement": 0, "imu": 0, "truth": 0, "clock": 0, "handover": 0}
         self._index = 0
         self._lap_offset_ns = 0
+        self._handover_due = p["hand_over_prior"]
         self._wall_start = time.monotonic() + p["start_delay"]
-        if p["publish_clock"]:
+        if p["publish_clock"] and p["start_time"] >= 0.0:
             self._epoch_ns = int(round(p["start_time"] * 1e9))
-        else:
-            self._epoch_ns = Clock(clock_type=ClockType.SYSTEM_TIME).now().nanoseconds
+        else:  # the wall-clock time when the trajectory starts
+            self._epoch_ns = Clock(clock_type=ClockType.SYSTEM_TIME).now().nanoseconds + int(p["start_delay"] * NS)
 
         qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=50)
         self.rae_pub = self.create_publisher(Vector3Stamped, "measurements/rae", qos)
         self.imu_pub = self.create_publisher(Imu, "imu", qos)
         self.truth_pub = self.create_publisher(Odometry, "truth/odometry", qos)
         self.clock_pub = self.create_publisher(ClockMsg, "/clock", qos) if p["publish_clock"] else None
+        latched = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=1,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)  # an estimator started later gets it
+        self.handover_pub = self.create_publisher(Odometry, "set_state", latched)
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(1.0 / p["clock_rate"], self._tick, clock=self._steady)
         n_meas = sum(e.kind == "measurement" for e in self.events)
@@ -126,12 +134,22 @@ class SimulatorNode(Node):
             self.published["clock"] += 1
         if target < 0:
             return
+        if self._handover_due:
+            self._hand_over()
         self.trajectory_ns = target
         while self._index < len(self.events) and self.events[self._index].t_ns <= target:
             self._emit(self.events[self._index])
             self._index += 1
         if self._index >= len(self.events):
             self._end_of_trajectory()
+
+    def _hand_over(self) -> None:
+        """The scenario's prior, at the start of the current lap, on ``set_state``."""
+        p, s = self.params, self.scenario
+        self.handover_pub.publish(conv.odometry_msg(s.prior_mean, s.prior_cov, self.stamp_ns(0), p["world_frame"],
+                                                    p["base_frame"]))
+        self.published["handover"] += 1
+        self._handover_due = False
 
     def _emit(self, event) -> None:
         p = self.params
@@ -158,9 +176,11 @@ class SimulatorNode(Node):
         end = self.stamp_ns(self.span_ns)
         if self.params["loop"]:
             self.get_logger().info(f"trajectory ended at {end * 1e-9:.3f} s; looping (the vehicle jumps back "
-                                   "to the start: reset the estimator)")
+                                   "to the start" + ("; the prior is handed over again)" if self.params["hand_over_prior"]
+                                                     else ": reset the estimator)"))
             self._lap_offset_ns += self.span_ns + self.period_ns
             self._index = 0
+            self._handover_due = self.params["hand_over_prior"]
             return
         self.finished = True
         self.get_logger().info(f"trajectory ended at {end * 1e-9:.3f} s after {self.published['measurement']} "
