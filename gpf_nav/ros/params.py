@@ -58,7 +58,7 @@ ESTIMATOR = [
     Spec("measurement_frame", "station", "Required header.frame_id of measurements/rae and measurements/range ('' = any)."),
     Spec("imu_frame", "base_link", "Required header.frame_id of imu ('' = any)."),
     # initialisation
-    Spec("initial_state", None, "Initial [x, y, z, vx, vy, vz] in world_frame [m, m/s]; unset: set_pose or measurements."),
+    Spec("initial_state", None, "Initial [x, y, z, vx, vy, vz] in world_frame [m, m/s]; unset: set_state, set_pose or measurements."),
     Spec("initial_std", [1e3, 1e3, 1e3, 1.0, 1.0, 1.0], "Initial standard deviations [m, m, m, m/s, m/s, m/s]."),
     Spec("initial_stamp", -1.0, "ROS time of initial_state [s]; negative: the first accepted measurement's stamp."),
     Spec("init_window", 10, "Measurements used to initialise from the data when no initial state is given (>= 2)."),
