@@ -71,7 +71,8 @@ def _assert_ros2_run_layout(ws: Path) -> None:
         assert (prefix / "share" / "gpf_nav" / "config" / name).is_file()
     assert (prefix / "share" / "gpf_nav" / "launch" / "gpf_nav.launch.py").is_file()
     # `source install/setup.bash` (colcon-bash) finds the package
-    probe = 'source install/setup.bash && echo "$AMENT_PREFIX_PATH" && python -c "import gpf_nav; print(gpf_nav.__file__)"'
+    probe = ('source install/setup.bash && echo "$AMENT_PREFIX_PATH" && '
+             'python -c "import gpf_nav; print(gpf_nav.__file__)"')
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "AMENT_PREFIX_PATH")}
     env["PATH"] = str(Path(sys.executable).parent) + os.pathsep + env.get("PATH", "")
     shown = subprocess.run(["bash", "-c", probe], cwd=ws, env=env, capture_output=True, text=True, timeout=60)

@@ -1,7 +1,8 @@
 """The console-script nodes as real processes end cleanly on SIGINT and SIGTERM, whoever sends it: exit
 status 0, no traceback, no ``KeyboardInterrupt``. Covers a signal to the process, to its process group
 (Ctrl-C in a terminal), SIGINT twice (``ros2 launch`` stopped with Ctrl-C: the group's, then launch's
-own) and SIGINT repeated while the node is shutting down. The simulator also exits 0 by itself at the end of its trajectory."""
+own) and SIGINT repeated while the node is shutting down. The simulator also exits 0 by itself at the
+end of its trajectory."""
 import os
 import random
 import signal

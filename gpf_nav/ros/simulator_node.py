@@ -175,9 +175,9 @@ class SimulatorNode(Node):
     def _end_of_trajectory(self) -> None:
         end = self.stamp_ns(self.span_ns)
         if self.params["loop"]:
+            then = "the prior is handed over again" if self.params["hand_over_prior"] else "reset the estimator"
             self.get_logger().info(f"trajectory ended at {end * 1e-9:.3f} s; looping (the vehicle jumps back "
-                                   "to the start" + ("; the prior is handed over again)" if self.params["hand_over_prior"]
-                                                     else ": reset the estimator)"))
+                                   f"to the start: {then})")
             self._lap_offset_ns += self.span_ns + self.period_ns
             self._index = 0
             self._handover_due = self.params["hand_over_prior"]
