@@ -397,8 +397,9 @@ def test_same_seed_same_messages_on_the_wire(ros):
             Parameter("rate_factor", value=40.0), Parameter("scenario.duration", value=20.0),
             Parameter("start_delay", value=0.5), Parameter("seed", value=9), Parameter("start_time", value=500.0),
             Parameter("scenario.case", value="partial")]))
-        assert ros.spin_until(lambda: sim.finished, 30.0)
-        ros.spin_for(0.5)
+        assert ros.spin_until(lambda: sim.finished, 120.0)
+        assert ros.spin_until(lambda: (len(rae), len(imu), len(truth)) == tuple(
+            sim.published[k] for k in ("measurement", "imu", "truth")), 120.0)  # all of them, however slow
         runs.append((
             [(conv.stamp_to_ns(m.header.stamp), repr((m.vector.x, m.vector.y, m.vector.z))) for m in rae],
             [(conv.stamp_to_ns(m.header.stamp), m.linear_acceleration.x, m.linear_acceleration.z) for m in imu],

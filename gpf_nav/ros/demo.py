@@ -62,6 +62,7 @@ def run(args) -> dict:
             Parameter("seed", value=int(args.seed)),
             Parameter("start_delay", value=1.0),
             Parameter("hand_over_prior", value=args.init == "prior"),
+            Parameter("truth_rate", value=0.0),  # truth at the measurement stamps only: what the summary uses
         ])
         nodes.append(sim)
         est = EstimatorNode(context=context, parameter_overrides=[

@@ -101,7 +101,9 @@ class SimulatorNode(Node):
         else:  # the wall-clock time when the trajectory starts
             self._epoch_ns = Clock(clock_type=ClockType.SYSTEM_TIME).now().nanoseconds + int(p["start_delay"] * NS)
 
-        qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=50)
+        # reliable with a deep history: a subscriber stalled for seconds at a high rate_factor (a busy
+        # machine) receives every message late rather than losing some
+        qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=1000)
         self.rae_pub = self.create_publisher(Vector3Stamped, "measurements/rae", qos)
         self.imu_pub = self.create_publisher(Imu, "imu", qos)
         self.truth_pub = self.create_publisher(Odometry, "truth/odometry", qos)
