@@ -23,7 +23,8 @@ setup(
         "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces", "rosbags"],
         "experiments": ["matplotlib", "tqdm", "dask[distributed]"],
         # mcap-ros2-support: an independent reader of the bags gpf-nav replay writes.
-        "test": ["pytest", "hypothesis", "colcon-core", "colcon-ros", "mcap-ros2-support"],
+        "test": ["pytest", "hypothesis", "wheel", "colcon-core", "colcon-ros", "colcon-package-selection",
+                 "colcon-bash", "mcap-ros2-support"],
     },
     zip_safe=True,
     maintainer="gpf_nav maintainers",

@@ -9,10 +9,13 @@
     gpf-nav replay       the estimator run offline over a rosbag2 bag, with a summary (``gpf_nav.ros.replay``)
 
 Sub-command modules are imported lazily, so e.g. ``bench`` needs neither ROS nor matplotlib. Every
-sub-command runs with the heap tuning of :mod:`gpf_nav.allocator`.
+sub-command runs with the heap tuning of :mod:`gpf_nav.allocator`. Bad arguments, to ``gpf-nav`` or
+to any sub-command, end with one line on stderr naming the problem and exit status 2
+(:class:`CommandParser`).
 """
 from __future__ import annotations
 
+import argparse
 import importlib
 import sys
 
@@ -27,14 +30,50 @@ COMMANDS = {
     "record": "gpf_nav.ros.record",
     "replay": "gpf_nav.ros.replay",
 }
+USAGE_ERROR = 2
+
+
+class CommandParser(argparse.ArgumentParser):
+    """The sub-commands' argument parser: an error is one line, ``<prog>: error: <problem>``, on
+    stderr, and exit status 2 (argparse's own convention, without the usage block)."""
+
+    def error(self, message: str):
+        self.exit(USAGE_ERROR, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive integer")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (0.0 < value < float("inf")):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive number")
+    return value
 
 
 def main(argv: list[str] | None = None) -> int:
     """Dispatch ``gpf-nav <command> [args]`` to ``<module>.main(args)``; returns the exit code."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    if not argv or argv[0] in ("-h", "--help") or argv[0] not in COMMANDS:
+    if argv and argv[0] in ("-h", "--help"):
         print(__doc__.strip())
-        return 0 if argv and argv[0] in ("-h", "--help") else 2
+        return 0
+    if not argv or argv[0] not in COMMANDS:
+        problem = f"unknown command {argv[0]!r}" if argv else "a command is required"
+        print(f"gpf-nav: error: {problem}; choose one of {', '.join(COMMANDS)} (see gpf-nav --help)",
+              file=sys.stderr)
+        return USAGE_ERROR
     retain_freed_memory()
     module = importlib.import_module(COMMANDS[argv[0]])
     return int(module.main(argv[1:]) or 0)

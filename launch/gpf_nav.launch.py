@@ -1,32 +1,44 @@
-"""Simulator + estimator on a ROS 2 system (needs launch and launch_ros; not testable on a pip-only machine).
+"""Simulator + estimator on a ROS 2 system (needs launch and launch_ros; not installable from PyPI).
 
     ros2 launch gpf_nav gpf_nav.launch.py                      # real time, simulated clock
     ros2 launch gpf_nav gpf_nav.launch.py rate_factor:=20.0 filter:=spf
+    ros2 launch gpf_nav gpf_nav.launch.py shutdown_on_simulator_exit:=true   # end with the trajectory
     ros2 topic echo /odometry/filtered
 
-Without launch_ros, ``gpf-nav demo`` runs the same pair in one process (docs/ros.md).
+Ctrl-C stops both nodes cleanly (exit 0). Without launch_ros, ``gpf-nav demo`` runs the same pair in
+one process (docs/ros.md).
 """
 import os
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
+from launch.actions import DeclareLaunchArgument, RegisterEventHandler, Shutdown
+from launch.conditions import IfCondition
+from launch.event_handlers import OnProcessExit
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 
 def generate_launch_description():
     config = os.path.join(get_package_share_directory("gpf_nav"), "config")
-    rate_factor = LaunchConfiguration("rate_factor")
+    simulator = Node(package="gpf_nav", executable="simulator", name="lunar_simulator", output="screen",
+                     parameters=[os.path.join(config, "simulator.yaml"),
+                                 {"rate_factor": LaunchConfiguration("rate_factor"), "publish_clock": True}])
+    estimator = Node(package="gpf_nav", executable="estimator", name="gpf_estimator", output="screen",
+                     parameters=[os.path.join(config, "estimator.yaml"),
+                                 {"use_sim_time": True, "filter": LaunchConfiguration("filter")}])
     return LaunchDescription([
         DeclareLaunchArgument("rate_factor", default_value="1.0",
                               description="Simulated seconds per wall second."),
         DeclareLaunchArgument("filter", default_value="gpf",
                               description="gpf | spf | ekf | ukf | enkf"),
-        Node(package="gpf_nav", executable="simulator", name="lunar_simulator", output="screen",
-             parameters=[os.path.join(config, "simulator.yaml"),
-                         {"rate_factor": rate_factor, "publish_clock": True}]),
-        Node(package="gpf_nav", executable="estimator", name="gpf_estimator", output="screen",
-             parameters=[os.path.join(config, "estimator.yaml"),
-                         {"use_sim_time": True, "filter": LaunchConfiguration("filter")}]),
+        DeclareLaunchArgument("shutdown_on_simulator_exit", default_value="false",
+                              description="true: end the launch (and the estimator) when the simulator "
+                                          "exits at the end of its trajectory; false: the estimator stays up."),
+        simulator,
+        estimator,
+        RegisterEventHandler(
+            OnProcessExit(target_action=simulator,
+                          on_exit=[Shutdown(reason="the simulator finished its trajectory")]),
+            condition=IfCondition(LaunchConfiguration("shutdown_on_simulator_exit"))),
     ])

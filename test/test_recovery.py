@@ -50,16 +50,30 @@ def test_all_particles_non_finite_reinitialises(cls):
     assert np.allclose(f.mean, MEAN, atol=2.0)
 
 
-@pytest.mark.parametrize("cls", [BootstrapPF, GeometricProjectionPF])
-def test_impossible_measurement_reinitialises_from_last_good(cls):
-    f = cls(constant_velocity_model(), n_particles=100, seed=0)
+PAPER_GPF = {"metric": "euclidean", "weighting": "likelihood", "unmodelled_acceleration_std": 0.0}
+
+
+@pytest.mark.parametrize("cls, options", [(BootstrapPF, {}), (GeometricProjectionPF, PAPER_GPF)])
+def test_impossible_measurement_reinitialises_from_last_good(cls, options):
+    f = cls(constant_velocity_model(), n_particles=100, seed=0, **options)
     f.initialize(MEAN, COV)
     f.predict(1.0)
-    f.update(np.array([1e300]))  # squared residual overflows (the GPF even projects onto it)
+    f.update(np.array([1e300]))  # squared residual overflows (the paper's GPF even projects onto it)
     assert f.recoveries == 1
     assert "weight" in f.last_recovery_reason or "non-finite" in f.last_recovery_reason
     assert np.all(np.isfinite(f.mean)) and np.all(np.isfinite(f.covariance))
     assert np.trace(f.covariance) > np.trace(COV)  # inflated
+
+
+def test_default_gpf_gates_an_impossible_measurement_and_keeps_its_estimate():
+    f = GeometricProjectionPF(constant_velocity_model(), n_particles=100, seed=0)
+    f.initialize(MEAN, COV)
+    f.predict(1.0)
+    before = f.mean.copy()
+    f.update(np.array([1e300]))
+    assert f.gated == 1 and f.recoveries == 0
+    assert np.all(np.isfinite(f.mean)) and np.all(np.isfinite(f.covariance))
+    assert np.allclose(f.mean, before, atol=0.5)
 
 
 def test_ess_collapse_reinitialises_after_the_set_number_of_updates():

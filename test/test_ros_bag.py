@@ -1,6 +1,7 @@
 """rosbag2: ``gpf-nav record`` and ``gpf-nav replay`` on real bags, read back by independent readers.
 
-* record -> a bag whose messages are exactly the simulator's (events, stamps, frames), whose metadata
+* record -> a bag whose messages are exactly the simulator's (events, stamps, frames, the prior handed
+  over on ``set_state``), whose metadata
   a ROS 2 Jazzy ``ros2 bag play`` accepts (version 9, cdr, QoS, type hashes equal to the installed
   message packages');
 * record -> replay round trip, MCAP (output read by ``mcap-ros2-support``) and sqlite3 (output read and
@@ -25,21 +26,26 @@ import pytest
 rclpy = pytest.importorskip("rclpy")
 pytest.importorskip("rosbags")
 
+from nav_msgs.msg import Odometry  # noqa: E402
+
 from gpf_nav.ros import conversions as conv  # noqa: E402
 from gpf_nav.ros.bag import BagReader, deserialize  # noqa: E402
 from gpf_nav.ros.params import ESTIMATOR, ParameterError, parameters_from_files, simulator_specs  # noqa: E402
 from gpf_nav.ros.playback import build_events  # noqa: E402
 from gpf_nav.ros.record import record  # noqa: E402
 from gpf_nav.ros.replay import REPLAY_PARAMETERS, replay  # noqa: E402
-from gpf_nav.ros.simulator_node import EVENT_TOPICS, event_message, scenario_from_parameters  # noqa: E402
+from gpf_nav.ros.simulator_node import (EVENT_TOPICS, event_message, handover_message,  # noqa: E402
+                                        scenario_from_parameters)
 
 S = 1_000_000_000
 ROOT = Path(__file__).resolve().parents[1]
 SIM_SECONDS = 150.0  # simulated seconds of the recorded scenario
+START_TIME = 1000.0  # ROS time of the recorded trajectory's start [s] (the default, -1, is the wall clock)
 
 
 def _sim_params(**overrides):
-    assignments = [f"scenario.duration:={SIM_SECONDS}"] + [f"{k}:={v}" for k, v in overrides.items()]
+    assignments = [f"scenario.duration:={SIM_SECONDS}", f"start_time:={START_TIME}"] + \
+        [f"{k}:={v}" for k, v in overrides.items()]
     return parameters_from_files(simulator_specs(), "lunar_simulator", [ROOT / "config/simulator.yaml"], assignments)
 
 
@@ -84,13 +90,14 @@ def test_record_writes_the_simulators_messages_with_metadata_ros2_bag_play_accep
     meta = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert meta["version"] == 9 and meta["storage_identifier"] == "mcap"
     topics = {t["topic_metadata"]["name"]: t for t in meta["topics_with_message_count"]}
-    assert set(topics) == {"/measurements/rae", "/imu", "/truth/odometry", "/clock"}
+    assert set(topics) == {"/measurements/rae", "/imu", "/truth/odometry", "/clock", "/set_state"}
     for name, t in topics.items():
         md = t["topic_metadata"]
         assert md["serialization_format"] == "cdr"
         (qos,) = md["offered_qos_profiles"]
         assert (qos["reliability"], qos["durability"], qos["history"], qos["depth"]) == \
-            ("reliable", "volatile", "keep_last", 50)
+            (("reliable", "transient_local", "keep_last", 1) if name == "/set_state" else
+             ("reliable", "volatile", "keep_last", 1000))
         assert t["message_count"] == counts[name] > 0
         # the type hash ros2 bag play checks against the installed message package's own description
         package, _, type_ = md["type"].split("/")
@@ -114,6 +121,10 @@ def test_record_writes_the_simulators_messages_with_metadata_ros2_bag_play_accep
             got[topic].append((t_ns, deserialize(raw, types[topic])))
         clock = [deserialize(raw, __import__("rosgraph_msgs.msg", fromlist=["Clock"]).Clock)
                  for _, _, raw in reader.messages(["/clock"])]
+        handover = [(t_ns, deserialize(raw, Odometry)) for _, t_ns, raw in reader.messages(["/set_state"])]
+    # the prior, handed over once at the trajectory start as the simulator does
+    assert handover == [(epoch, handover_message(scenario, epoch, p))]
+    np.testing.assert_array_equal(conv.odometry_state(handover[0][1]), scenario.prior_mean)
     for topic in types:
         assert len(got[topic]) == len(expected[topic])
         for (t_got, m_got), (t_exp, m_exp) in zip(got[topic], expected[topic]):
@@ -133,6 +144,19 @@ def test_record_refuses_an_existing_bag_and_bad_parameters(tmp_path, recorded):
     assert not (tmp_path / "x").exists()
 
 
+def test_record_starts_at_the_wall_clock_time_by_default(tmp_path):
+    """start_time -1 (the default, as for the simulator): the trajectory starts at the wall-clock time of
+    the recording; the prior is handed over then."""
+    p = _sim_params(start_time=-1.0, **{"scenario.duration": 10.0})
+    before = time.time_ns()
+    record(str(tmp_path / "now"), p, "mcap")
+    after = time.time_ns()
+    with BagReader(tmp_path / "now") as reader:
+        assert before <= reader.start_ns <= after
+        ((_, t_ns, raw),) = list(reader.messages(["/set_state"]))
+    assert t_ns == reader.start_ns == conv.stamp_to_ns(deserialize(raw, Odometry).header.stamp)
+
+
 # --- replay --------------------------------------------------------------------------------------------
 def test_round_trip_record_replay_mcap_read_back_by_mcap_ros2_support(recorded, tmp_path):
     path, p, counts = recorded
@@ -145,8 +169,10 @@ def test_round_trip_record_replay_mcap_read_back_by_mcap_ros2_support(recorded, 
     assert summary["inputs"]["/measurements/rae"] == {"read": n_meas, "undecodable": 0, "accepted": n_meas,
                                                       "rejected": {}}
     assert summary["inputs"]["/imu"]["accepted"] == counts["/imu"]
+    assert summary["inputs"]["/set_state"] == {"read": 1, "undecodable": 0, "accepted": 1, "rejected": {}}
     assert summary["rejected_by_reason"] == {}
-    assert summary["updates"] == n_meas - 10 + 1  # init_window 10: the tenth initialises
+    assert summary["initialized_from"] == "set_state"
+    assert summary["updates"] == n_meas  # initialised from the prior handed over: every measurement updates
     assert summary["truth"]["compared_updates"] == summary["updates"]
     for key in ("position_rmse_m", "velocity_rmse_mps", "mean_nees"):
         assert math.isfinite(summary[key]) and summary[key] > 0
@@ -185,8 +211,10 @@ def test_round_trip_sqlite3_read_back_by_rosbags(tmp_path):
     from rosbags.typesys import Stores, get_typestore
     bag = tmp_path / "scenario"
     assert _cli("record", bag, "--duration", 60, "--case", "partial", "--seed", 3, "--storage", "sqlite3",
-                "-p", "imu_rate:=2.0").returncode == 0
+                "-p", "imu_rate:=2.0", "-p", "hand_over_prior:=false").returncode == 0
     assert list(bag.glob("*.db3"))
+    with BagReader(bag) as reader:
+        assert "/set_state" not in reader.topics and reader.counts["/clock"] > 0
     # the partial case never measures azimuth: no batch initialisation, the prior as initial_state
     from gpf_nav.scenario import ScenarioConfig, generate
     prior = generate(ScenarioConfig(duration=60.0, case="partial"), 3)
@@ -213,7 +241,8 @@ def test_round_trip_sqlite3_read_back_by_rosbags(tmp_path):
 
 # --- garbage -------------------------------------------------------------------------------------------
 def _garbage_bag(path: Path, topic: str):
-    """A bag written by rosbags alone: 40 s of scenario measurements on ``topic`` plus IMU, with garbage.
+    """A bag written by rosbags alone: 40 s of scenario measurements on ``topic`` plus IMU, with garbage,
+    and a ``set_state`` (the truth at 20 s) once the filter has initialised from the measurements.
 
     Returns (expected rejections by reason, expected masked components, undecodable messages)."""
     from rosbags.rosbag2 import StoragePlugin, Writer
@@ -225,6 +254,9 @@ def _garbage_bag(path: Path, topic: str):
     Q, Imu = ts.types["geometry_msgs/msg/Quaternion"], ts.types["sensor_msgs/msg/Imu"]
     scenario = generate(ScenarioConfig(duration=40.0), 5)
     start = 1000 * S
+    Od = ts.types["nav_msgs/msg/Odometry"]
+    Pose, Point, Twist = (ts.types[f"geometry_msgs/msg/{t}"] for t in ("Pose", "Point", "Twist"))
+    PWC, TWC = (ts.types[f"geometry_msgs/msg/{t}WithCovariance"] for t in ("Pose", "Twist"))
 
     def rae(stamp_ns, values, frame="station", nanosec=None):
         stamp = T(sec=stamp_ns // S, nanosec=stamp_ns % S if nanosec is None else nanosec)
@@ -239,6 +271,17 @@ def _garbage_bag(path: Path, topic: str):
                   linear_acceleration=V3(*map(float, accel)), linear_acceleration_covariance=cov)
         return ts.serialize_cdr(msg, Imu.__msgtype__)
 
+    def set_state(stamp_ns, state, cov, frame="moon_inertial"):
+        pose_cov, twist_cov = np.zeros((6, 6)), np.zeros((6, 6))
+        pose_cov[:3, :3], twist_cov[:3, :3] = cov[:3, :3], cov[3:, 3:]
+        msg = Od(header=H(stamp=T(sec=stamp_ns // S, nanosec=stamp_ns % S), frame_id=frame),
+                 child_frame_id="base_link",
+                 pose=PWC(pose=Pose(position=Point(*map(float, state[:3])), orientation=Q(0.0, 0.0, 0.0, 1.0)),
+                          covariance=pose_cov.reshape(-1)),
+                 twist=TWC(twist=Twist(linear=V3(*map(float, state[3:])), angular=V3(0.0, 0.0, 0.0)),
+                           covariance=twist_cov.reshape(-1)))
+        return ts.serialize_cdr(msg, Od.__msgtype__)
+
     records = []  # (recording time, topic, bytes)
     for t, y in zip(scenario.times, scenario.measurements):
         records.append((start + int(t * S), topic, rae(start + int(t * S), y)))
@@ -246,6 +289,8 @@ def _garbage_bag(path: Path, topic: str):
     y0 = scenario.measurements[0]
     at = start + 21 * S  # recording time of the garbage: after the filter initialised (10 x 2 s)
     records += [
+        (at, "/set_state", set_state(start + 20 * S, scenario.truth[10], scenario.prior_cov)),  # truth at 20 s
+        (at, "/set_state", set_state(start + 20 * S, scenario.truth[10], scenario.prior_cov, frame="map")),
         (at, topic, rae(at, (-5.0, y0[1], y0[2]))),                          # non_positive_range
         (at, topic, rae(at, (math.nan, math.nan, math.nan))),                # no_measured_component
         (at, topic, rae(at, (math.inf, y0[1], y0[2]))),                      # non_finite
@@ -262,10 +307,11 @@ def _garbage_bag(path: Path, topic: str):
     writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
     with writer:
         conns = {topic: writer.add_connection(topic, VS.__msgtype__, typestore=ts),
-                 "/imu": writer.add_connection("/imu", Imu.__msgtype__, typestore=ts)}
+                 "/imu": writer.add_connection("/imu", Imu.__msgtype__, typestore=ts),
+                 "/set_state": writer.add_connection("/set_state", Od.__msgtype__, typestore=ts)}
         for t_ns, name, data in records:
             writer.write(conns[name], t_ns, data)
-    expected = {"non_positive_range": 1, "no_measured_component": 1, "non_finite": 2, "wrong_frame": 2,
+    expected = {"non_positive_range": 1, "no_measured_component": 1, "non_finite": 2, "wrong_frame": 3,
                 "stale_stamp": 1, "bad_stamp": 1, "future_stamp": 1}
     return expected, 1, 1, len(scenario.times)
 
@@ -281,6 +327,7 @@ def test_garbage_is_counted_by_reason_like_the_node_and_never_output_as_nan(tmp_
     assert summary["undecodable"] == undecodable
     assert summary["masked_components"] == masked
     assert summary["inputs"]["/tracking/rae"]["accepted"] == n_valid + 1
+    assert summary["inputs"]["/set_state"]["accepted"] == 1 and summary["initialized_from"] == "set_state"
     assert summary["truth"]["messages"] == 0 and "position_rmse_m" not in summary
     assert not (tmp_path / "out/errors.png").exists()
     assert "dropped rae message: non_positive_range" in r.stderr  # the node's log line
@@ -300,10 +347,11 @@ def test_garbage_is_counted_by_reason_like_the_node_and_never_output_as_nan(tmp_
 
 def test_replay_gives_the_nodes_estimates_and_counters(tmp_path):
     """The garbage bag's messages published to a real EstimatorNode (use_sim_time) over DDS, one at a time
-    after a /clock at the message's recording time: the node's odometry at every update and its counters
-    equal the replay's."""
+    after a /clock at the message's recording time (set_state by a latched publisher, as the simulator's):
+    the node's odometry (at every update and at the set_state) and its counters equal the replay's."""
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
+    from rclpy.qos import DurabilityPolicy, QoSProfile
     from geometry_msgs.msg import Vector3Stamped
     from nav_msgs.msg import Odometry
     from rosgraph_msgs.msg import Clock
@@ -313,10 +361,9 @@ def test_replay_gives_the_nodes_estimates_and_counters(tmp_path):
     expected, _, _, _ = _garbage_bag(bag, "/measurements/rae")
     params = ["publish_rate:=0.0", "n_particles:=100"]
     summary, _ = replay(str(bag), str(tmp_path / "out"), _est_params(*params), progress=False)
-    replayed = {}
-    for topic, _, _, m in _mcap_messages(tmp_path / "out/estimates"):
-        if topic == "/odometry/filtered":
-            replayed[conv.stamp_to_ns(m.header.stamp)] = _odometry_values(m)
+    replayed = [(conv.stamp_to_ns(m.header.stamp), _odometry_values(m))
+                for topic, _, _, m in _mcap_messages(tmp_path / "out/estimates") if topic == "/odometry/filtered"]
+    assert len(replayed) == summary["updates"] + 1  # publish_rate 0: the updates and the set_state's
 
     context = rclpy.Context()
     rclpy.init(args=[], context=context, domain_id=random.Random(os.getpid() ^ time.time_ns()).randrange(110, 230))
@@ -328,7 +375,9 @@ def test_replay_gives_the_nodes_estimates_and_counters(tmp_path):
     odom = []
     probe.create_subscription(Odometry, "odometry/filtered", odom.append, 1000)
     pubs = {"/measurements/rae": (probe.create_publisher(Vector3Stamped, "measurements/rae", 10), Vector3Stamped),
-            "/imu": (probe.create_publisher(Imu, "imu", 10), Imu)}
+            "/imu": (probe.create_publisher(Imu, "imu", 10), Imu),
+            "/set_state": (probe.create_publisher(Odometry, "set_state", QoSProfile(
+                depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)), Odometry)}
     clock_pub = probe.create_publisher(Clock, "/clock", 10)
     for node in (est, probe):
         executor.add_node(node)
@@ -354,7 +403,7 @@ def test_replay_gives_the_nodes_estimates_and_counters(tmp_path):
                 before = c.total_accepted + c.total_rejected
                 pub.publish(msg)
                 assert spin_until(lambda: c.total_accepted + c.total_rejected > before)
-        assert spin_until(lambda: len(odom) >= summary["updates"])
+        assert spin_until(lambda: len(odom) >= len(replayed))
         node_rejected = {r: n for r, n in c.rejected.items() if n}
     finally:
         executor.shutdown()
@@ -362,11 +411,10 @@ def test_replay_gives_the_nodes_estimates_and_counters(tmp_path):
         probe.destroy_node()
         rclpy.try_shutdown(context=context)
     assert node_rejected == summary["rejected_by_reason"] == expected
-    node = {conv.stamp_to_ns(m.header.stamp): _odometry_values(m) for m in odom}
-    assert len(node) == summary["updates"]
-    assert set(node) == set(replayed)
-    for stamp in node:
-        np.testing.assert_allclose(node[stamp], replayed[stamp], rtol=1e-12, atol=0)
+    node = [(conv.stamp_to_ns(m.header.stamp), _odometry_values(m)) for m in odom]
+    assert [stamp for stamp, _ in node] == [stamp for stamp, _ in replayed]
+    for (_, values), (_, expected_values) in zip(node, replayed):
+        np.testing.assert_allclose(values, expected_values, rtol=1e-12, atol=0)
 
 
 # --- unusable input ------------------------------------------------------------------------------------

@@ -1,8 +1,9 @@
 """The ament_python layout, proved with colcon (colcon-core + colcon-ros from PyPI) in a temporary
 workspace, and the installed console scripts run as separate processes over DDS:
 
-* ``colcon build --base-paths src`` installs ``lib/gpf_nav/{estimator,simulator}`` (what ``ros2 run``
-  looks for), the ament index marker and ``share/gpf_nav/{config,launch}``;
+* the documented ``colcon build --packages-select gpf_nav`` installs ``lib/gpf_nav/{estimator,simulator}``
+  (what ``ros2 run`` looks for), the ament index marker and ``share/gpf_nav/{config,launch}``, and
+  ``source install/setup.bash`` puts the package on the paths; ``--symlink-install`` gives the same layout;
 * the installed ``estimator`` refuses ``filter:=bogus`` with a clear FATAL line and exit code 2;
 * the installed ``simulator`` and ``estimator`` run as two processes (``use_sim_time``) while this test
   subscribes to ``odometry/filtered`` and ``truth/odometry`` and checks the error is bounded.
@@ -30,13 +31,12 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from gpf_nav.ros import conversions as conv  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGE_FILES = ("setup.py", "setup.cfg", "package.xml", "resource", "gpf_nav", "config", "launch")
+PACKAGE_FILES = ("setup.py", "setup.cfg", "pyproject.toml", "package.xml", "resource", "gpf_nav", "config", "launch")
 COLCON = "import sys; from colcon_core.command import main; sys.exit(main())"
 
 
-@pytest.fixture(scope="module")
-def workspace(tmp_path_factory):
-    ws = tmp_path_factory.mktemp("colcon_ws")
+def _build(ws: Path, *options: str) -> Path:
+    """Copy the package to ``ws/src/gpf_nav`` and run the documented colcon command in ``ws``."""
     src = ws / "src" / "gpf_nav"
     src.mkdir(parents=True)
     for name in PACKAGE_FILES:
@@ -48,10 +48,37 @@ def workspace(tmp_path_factory):
     env = dict(os.environ)
     env["PATH"] = str(Path(sys.executable).parent) + os.pathsep + env.get("PATH", "")
     env.pop("PYTHONPATH", None)
-    result = subprocess.run([sys.executable, "-c", COLCON, "build", "--base-paths", "src"], cwd=ws, env=env,
-                            capture_output=True, text=True, timeout=300)
+    result = subprocess.run([sys.executable, "-c", COLCON, "build", "--packages-select", "gpf_nav", *options],
+                            cwd=ws, env=env, capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     return ws
+
+
+@pytest.fixture(scope="module")
+def workspace(tmp_path_factory):
+    return _build(tmp_path_factory.mktemp("colcon_ws"))
+
+
+def _assert_ros2_run_layout(ws: Path) -> None:
+    prefix = ws / "install" / "gpf_nav"
+    for script in ("estimator", "simulator", "gpf-nav"):
+        path = prefix / "lib" / "gpf_nav" / script
+        assert path.is_file() and os.access(path, os.X_OK), path
+    assert not (prefix / "bin").exists()
+    assert (prefix / "share" / "ament_index" / "resource_index" / "packages" / "gpf_nav").is_file()
+    assert (prefix / "share" / "gpf_nav" / "package.xml").is_file()
+    for name in ("estimator.yaml", "simulator.yaml"):
+        assert (prefix / "share" / "gpf_nav" / "config" / name).is_file()
+    assert (prefix / "share" / "gpf_nav" / "launch" / "gpf_nav.launch.py").is_file()
+    # `source install/setup.bash` (colcon-bash) finds the package
+    probe = ('source install/setup.bash && echo "$AMENT_PREFIX_PATH" && '
+             'python -c "import gpf_nav; print(gpf_nav.__file__)"')
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "AMENT_PREFIX_PATH")}
+    env["PATH"] = str(Path(sys.executable).parent) + os.pathsep + env.get("PATH", "")
+    shown = subprocess.run(["bash", "-c", probe], cwd=ws, env=env, capture_output=True, text=True, timeout=60)
+    assert shown.returncode == 0, shown.stderr
+    assert str(prefix) in shown.stdout.splitlines()[0]
+    assert str(ws) in shown.stdout.splitlines()[-1], shown.stdout
 
 
 def _installed_env(ws: Path, domain: int) -> dict:
@@ -64,19 +91,15 @@ def _installed_env(ws: Path, domain: int) -> dict:
 
 
 def test_colcon_build_installs_the_ros2_run_layout(workspace):
-    prefix = workspace / "install" / "gpf_nav"
-    for script in ("estimator", "simulator", "gpf-nav"):
-        path = prefix / "lib" / "gpf_nav" / script
-        assert path.is_file() and os.access(path, os.X_OK), path
-    assert (prefix / "share" / "ament_index" / "resource_index" / "packages" / "gpf_nav").is_file()
-    assert (prefix / "share" / "gpf_nav" / "package.xml").is_file()
-    for name in ("estimator.yaml", "simulator.yaml"):
-        assert (prefix / "share" / "gpf_nav" / "config" / name).is_file()
-    assert (prefix / "share" / "gpf_nav" / "launch" / "gpf_nav.launch.py").is_file()
+    _assert_ros2_run_layout(workspace)
     env = _installed_env(workspace, 0)
     where = subprocess.run([sys.executable, "-c", "import gpf_nav; print(gpf_nav.__file__)"], env=env,
                            cwd=workspace, capture_output=True, text=True, timeout=60)
-    assert str(prefix) in where.stdout
+    assert str(workspace / "install" / "gpf_nav") in where.stdout
+
+
+def test_colcon_symlink_install_gives_the_same_layout(tmp_path):
+    _assert_ros2_run_layout(_build(tmp_path, "--symlink-install"))
 
 
 def test_installed_estimator_refuses_bad_parameters(workspace):
@@ -109,7 +132,7 @@ def test_installed_simulator_and_estimator_processes_track_truth(workspace):
     est_log = open(logs / "estimator.log", "w")
     sim_log = open(logs / "simulator.log", "w")
     est = subprocess.Popen([str(lib / "estimator"), "--ros-args", "--params-file", str(share / "estimator.yaml"),
-                            "-p", "use_sim_time:=true", "-p", "n_particles:=300"],
+                            "-p", "use_sim_time:=true", "-p", "n_particles:=300", "-p", "queue_depth:=200"],
                            env=env, cwd=workspace, stdout=est_log, stderr=subprocess.STDOUT)
     sim = None
     try:
@@ -119,19 +142,18 @@ def test_installed_simulator_and_estimator_processes_track_truth(workspace):
             executor.spin_once(timeout_sec=0.1)
         sim = subprocess.Popen([str(lib / "simulator"), "--ros-args", "--params-file", str(share / "simulator.yaml"),
                                 "-p", "rate_factor:=25.0", "-p", "scenario.duration:=120.0",
-                                "-p", "start_delay:=2.0"],
+                                "-p", "start_delay:=2.0", "-p", "truth_rate:=0.0", "-p", "imu_rate:=0.0"],
                                env=env, cwd=workspace, stdout=sim_log, stderr=subprocess.STDOUT)
-        deadline = time.monotonic() + 120.0
-        while time.monotonic() < deadline and sim.poll() is None:
-            executor.spin_once(timeout_sec=0.05)
-        end = time.monotonic() + 1.0
-        while time.monotonic() < end:
+        # queues deeper than the run (60 measurements, truth only at their stamps): a busy machine delays
+        # messages but sheds none, so wait for the estimates rather than for a duration
+        deadline = time.monotonic() + 240.0
+        while time.monotonic() < deadline and (sim.poll() is None or len(set(odom) & set(truth)) < 50):
             executor.spin_once(timeout_sec=0.05)
         assert sim.returncode == 0, (logs / "simulator.log").read_text()
         assert "trajectory ended" in (logs / "simulator.log").read_text()
         assert est.poll() is None, (logs / "estimator.log").read_text()
         common = sorted(set(odom) & set(truth))
-        assert len(common) >= 30, (len(odom), len(truth), (logs / "estimator.log").read_text())
+        assert len(common) >= 50, (len(odom), len(truth), (logs / "estimator.log").read_text())
         err = np.array([np.linalg.norm(odom[k][:3] - truth[k][:3]) for k in common])
         assert np.all(np.isfinite(err)) and np.median(err) < 5e3 and err.max() < 25e3, err
     finally:

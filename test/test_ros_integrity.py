@@ -178,6 +178,7 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from geometry_msgs.msg import Vector3Stamped  # noqa: E402
 from nav_msgs.msg import Odometry  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
+from rosgraph_msgs.msg import Clock as ClockMsg  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from gpf_nav.ros import conversions as conv  # noqa: E402
@@ -189,25 +190,28 @@ ERROR, WARN = b"\x02", b"\x01"
 
 
 class _Feed:
-    """Publishes the scenario's measurements (stamps in the past) to an estimator, one at a time, each
-    sent again until its odometry comes back: no message is lost, the stream is processed in order."""
+    """Publishes the scenario's measurements to an estimator on simulated time, one at a time: ``/clock``
+    is first set to the measurement's stamp (so its age, and the node's idea of "now", never depend on
+    how fast this machine feeds), then the measurement is sent again until its odometry comes back: no
+    message is lost, the stream is processed in order."""
 
-    def __init__(self, ros, scenario, last=None, **params):
+    base = 1000 * S  # ROS time of the scenario's start
+
+    def __init__(self, ros, scenario, **params):
         self.ros, self.scenario = ros, scenario
-        now = ros.node.get_clock().now().nanoseconds
-        last = len(scenario.times) - 1 if last is None else last  # its stamp: 1 s ago
-        self.base = now - int((scenario.times[last] + 1.0) * S)
         self.odom = ros.record(Odometry, "odometry/filtered")
         self.diagnostics = ros.record(DiagnosticArray, "/diagnostics")
         prior_std = np.sqrt(np.diag(scenario.prior_cov))
         overrides = dict(n_particles=200, publish_rate=0.0, diagnostics_period=0.25, max_published_particles=0,
-                         initial_state=[float(v) for v in scenario.prior_mean],
+                         initial_state=[float(v) for v in scenario.prior_mean], use_sim_time=True,
                          initial_std=[float(v) for v in prior_std], initial_stamp=self.base * 1e-9)
         overrides.update(params)
         self.est = ros.add(EstimatorNode(context=ros.context, parameter_overrides=[
             Parameter(k, value=v) for k, v in overrides.items()]))
         self.pub = ros.node.create_publisher(Vector3Stamped, "measurements/rae", 100)
-        assert ros.spin_until(lambda: self.pub.get_subscription_count() > 0 and self.diagnostics, 30.0)
+        self.clock = ros.node.create_publisher(ClockMsg, "/clock", 10)
+        assert ros.spin_until(lambda: self.pub.get_subscription_count() > 0 and self.diagnostics
+                              and self.clock.get_subscription_count() > 0, 30.0)
 
     def stamp(self, k):
         return self.base + int(round(self.scenario.times[k] * S))
@@ -216,6 +220,12 @@ class _Feed:
         y = self.scenario.measurements[k].copy()
         y[0] += bias
         stamp = self.stamp(k)
+        for _ in range(100):
+            self.clock.publish(ClockMsg(clock=conv.ns_to_stamp(stamp)))
+            if self.ros.spin_until(lambda: self.est.get_clock().now().nanoseconds >= stamp, 1.0):
+                break
+        else:
+            raise AssertionError(f"the estimator's clock did not reach measurement {k}")
         for _ in range(20):
             self.pub.publish(_rae(stamp, y))
             if self.ros.spin_until(lambda: self.odom and conv.stamp_to_ns(self.odom[-1].header.stamp) == stamp, 1.0):
@@ -239,7 +249,7 @@ class _Feed:
 def test_range_bias_raises_error_with_the_monitor_as_cause_over_dds(ros):
     scenario = generate(CLEAN, 0)
     n_clean = 120  # the monitor is ready after (6 + 1) * (10 + 2) = 84 updates
-    feed = _Feed(ros, scenario, last=n_clean + 3, monitor_hold=3.0)
+    feed = _Feed(ros, scenario, monitor_hold=3.0)
     ready_levels = []
     for k in range(n_clean):
         feed.send(k)
@@ -285,7 +295,7 @@ def test_range_bias_raises_error_with_the_monitor_as_cause_over_dds(ros):
     (dict(monitor_enabled=False), "disabled", "disabled (monitor_enabled: false)"),
 ])
 def test_monitor_unavailable_or_disabled_over_dds(ros, params, level, monitor):
-    feed = _Feed(ros, generate(ScenarioConfig(duration=20.0, epsilon=0.0), 2), last=2, **params)
+    feed = _Feed(ros, generate(ScenarioConfig(duration=20.0, epsilon=0.0), 2), **params)
     for k in range(3):
         feed.send(k)
     status, values = feed.status_after(lambda v: v["measurements accepted"] == "3")

@@ -271,6 +271,24 @@ def test_engine_set_pose_and_reset():
     assert eng2.init_source == "parameters"  # initial_stamp >= 0: back to the start-up state
 
 
+def test_engine_set_state_is_a_full_handover():
+    s = generate(SHORT, 7)
+    eng, _ = _engine(s, initial=False)  # no velocity anywhere: set_pose could not initialise it
+    now = _stamp(s, 0)
+    assert eng.set_state(now + 5 * S, s.prior_mean, s.prior_cov, now) == (False, "future_stamp")
+    bad = s.prior_cov.copy()
+    bad[0, 0] = np.nan
+    assert eng.set_state(now, s.prior_mean, bad, now) == (False, "non_finite")
+    assert not eng.initialized
+    assert eng.set_state(now, s.prior_mean, s.prior_cov, now) == (True, "")
+    assert eng.initialized and eng.init_source == "set_state" and eng.t_ns == now
+    assert np.all(np.abs(eng.mean - s.prior_mean) <= 5 * np.sqrt(np.diag(s.prior_cov)))
+    assert eng.measurement(_stamp(s, 1), s.measurements[1], None) == (True, "")  # used at once: no init window
+    assert eng.set_state(now, s.prior_mean, s.prior_cov, None) == (False, "stale_stamp")
+    c = eng.counters
+    assert c.accepted["set_state"] == 1 and c.rejected_by_stream[("set_state", "future_stamp")] == 1
+
+
 class _Exploding:
     """Wraps a filter; its estimate turns NaN on the ``after``-th update."""
 

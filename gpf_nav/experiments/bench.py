@@ -10,7 +10,6 @@ gpf_nav.experiments.bench`` runs with the C library's default allocator, for com
 """
 from __future__ import annotations
 
-import argparse
 import json
 import platform
 import time
@@ -19,6 +18,7 @@ from dataclasses import replace
 import numpy as np
 
 from gpf_nav import allocator
+from gpf_nav.cli import CommandParser, positive_int
 from gpf_nav.filters import BootstrapPF, EnsembleKF, ExtendedKF, GeometricProjectionPF, UnscentedKF
 from gpf_nav.scenario import ScenarioConfig, filter_model, generate
 
@@ -99,11 +99,11 @@ def format_table(report: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="gpf-nav bench", description=__doc__.splitlines()[0])
+    parser = CommandParser(prog="gpf-nav bench", description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
-    parser.add_argument("--particles", type=int, nargs="+", default=list(PARTICLE_COUNTS),
+    parser.add_argument("--particles", type=positive_int, nargs="+", default=list(PARTICLE_COUNTS),
                         help="particle counts for GPF and SPF (default: 500 10000 100000)")
-    parser.add_argument("--repeats", type=int, default=5, help="timed blocks per filter (median taken)")
+    parser.add_argument("--repeats", type=positive_int, default=5, help="timed blocks per filter (median taken)")
     parser.add_argument("--node", action="store_true",
                         help="run the ROS node-latency benchmark instead (arguments after -- go to it)")
     args, rest = parser.parse_known_args(argv)

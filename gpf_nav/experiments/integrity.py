@@ -24,7 +24,6 @@ Output: a table on stdout, ``<out>/integrity.json`` and the figures ``docs/figur
 """
 from __future__ import annotations
 
-import argparse
 import copy
 import json
 import math
@@ -35,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gpf_nav.cli import CommandParser, positive_int
 from gpf_nav.integrity import CostateMonitor
 from gpf_nav.models.base import wrap_angle
 from gpf_nav.models.lunar import MOON_RADIUS, LunarDescentModel
@@ -670,10 +670,9 @@ def _floats(text: str) -> tuple[float, ...]:
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     d = Settings()
-    parser = argparse.ArgumentParser(prog="python -m gpf_nav.experiments.integrity",
-                                     description=__doc__.split("\n\n")[0])
-    parser.add_argument("--runs", type=int, default=d.runs)
-    parser.add_argument("--particles", type=int, default=d.particles)
+    parser = CommandParser(prog="gpf-nav integrity", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--runs", type=positive_int, default=d.runs)
+    parser.add_argument("--particles", type=positive_int, default=d.particles)
     parser.add_argument("--seed", type=int, default=d.seed)
     parser.add_argument("--epsilon", type=float, default=d.epsilon)
     parser.add_argument("--fault-time", type=float, default=d.fault_time, help="s")
@@ -683,9 +682,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="comma list of gravity multipliers from the fault time")
     parser.add_argument("--range-biases", default=_csv(d.range_biases), help="comma list, range sigmas")
     parser.add_argument("--azimuth-biases", default=_csv(d.azimuth_biases), help="comma list, azimuth sigmas")
-    parser.add_argument("--window", type=int, default=d.window)
-    parser.add_argument("--reference", type=int, default=d.reference)
-    parser.add_argument("--min-reference", type=int, default=d.min_reference)
+    parser.add_argument("--window", type=positive_int, default=d.window)
+    parser.add_argument("--reference", type=positive_int, default=d.reference)
+    parser.add_argument("--min-reference", type=positive_int, default=d.min_reference)
     parser.add_argument("--gap", type=int, default=d.gap)
     parser.add_argument("--false-alarm-rate", type=float, default=d.false_alarm_rate)
     parser.add_argument("--warn-false-alarm-rate", type=float, default=d.warn_false_alarm_rate)
@@ -701,15 +700,19 @@ def main(argv: list[str] | None = None) -> int:
     variants = tuple(v.strip() for v in args.variants.split(",") if v.strip())
     if not variants or any(v not in VARIANTS for v in variants):
         parser.error(f"--variants must be a comma list of {VARIANTS}")
-    if args.runs < 1:
-        parser.error("--runs must be positive")
+    try:
+        lists = {name: _floats(getattr(args, name)) for name in ("gravity_scales", "range_biases", "azimuth_biases")}
+    except ValueError:
+        parser.error("--gravity-scales, --range-biases and --azimuth-biases must be comma-separated numbers")
     settings = Settings(runs=args.runs, particles=args.particles, seed=args.seed, epsilon=args.epsilon,
-                        fault_time=args.fault_time, post_fault=args.post_fault,
-                        gravity_scales=_floats(args.gravity_scales), range_biases=_floats(args.range_biases),
-                        azimuth_biases=_floats(args.azimuth_biases), window=args.window,
+                        fault_time=args.fault_time, post_fault=args.post_fault, **lists, window=args.window,
                         reference=args.reference, min_reference=args.min_reference, gap=args.gap,
                         false_alarm_rate=args.false_alarm_rate,
                         warn_false_alarm_rate=args.warn_false_alarm_rate, variants=variants)
+    try:
+        settings.monitor()  # refuses inconsistent monitor settings before any run
+    except ValueError as err:
+        parser.error(str(err))
     start = time.perf_counter()
     if args.replot:
         report = _nan_for_none(json.loads(args.replot.read_text()))

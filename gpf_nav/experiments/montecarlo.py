@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gpf_nav.cli import CommandParser, positive_float, positive_int
 from gpf_nav.experiments import metrics
 from gpf_nav.experiments.parallel import default_workers, map_tasks
 from gpf_nav.experiments.runner import (ALIASES, DEFAULT_PARTICLES, EXTRA_FILTERS, FILTERS, GPF_DEFAULT,
@@ -59,26 +60,26 @@ METRICS = {
 # --- command line shared with the sweep -------------------------------------------------------------
 def add_common_arguments(parser: argparse.ArgumentParser, runs: int) -> None:
     """Options shared by ``montecarlo`` and ``sweep``."""
-    parser.add_argument("--runs", type=int, default=runs, help=f"Monte Carlo runs (default {runs})")
+    parser.add_argument("--runs", type=positive_int, default=runs, help=f"Monte Carlo runs (default {runs})")
     parser.add_argument("--seed", type=int, default=0, help="campaign seed (default 0)")
-    parser.add_argument("--workers", type=int, default=None,
+    parser.add_argument("--workers", type=positive_int, default=None,
                         help="local worker processes (default: all local cores)")
     parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
                         help="run on this Dask distributed scheduler (e.g. tcp://host:8786) instead "
                              "of local processes; the workers must have gpf_nav installed")
     parser.add_argument("--config", type=Path, default=None,
                         help="scenario YAML (default: the built-in defaults = config/scenario.yaml)")
-    parser.add_argument("--duration", type=float, default=None,
+    parser.add_argument("--duration", type=positive_float, default=None,
                         help="override the scenario duration (s); default 2400 s")
-    parser.add_argument("--dt", type=float, default=None, help="override the filter step (s); default 2 s")
-    parser.add_argument("--particles", type=int, default=DEFAULT_PARTICLES,
+    parser.add_argument("--dt", type=positive_float, default=None, help="override the filter step (s); default 2 s")
+    parser.add_argument("--particles", type=positive_int, default=DEFAULT_PARTICLES,
                         help=f"particles / ensemble members (default {DEFAULT_PARTICLES})")
     parser.add_argument("--filters", default=None,
                         help="comma-separated short names (default: gpf, ekf-comp, ekf-oracle, "
                              "ukf-oracle and the paper's seven rows gpf-paper, gpf-printed, gpf-exact, spf, "
                              "ekf, ukf, enkf); also available: gpf-qmetric = " + ", ".join(EXTRA_FILTERS))
     parser.add_argument("--cases", default="full,partial", help="comma-separated cases (full,partial)")
-    parser.add_argument("--divergence-km", type=float, default=1000.0,
+    parser.add_argument("--divergence-km", type=positive_float, default=1000.0,
                         help="position error counted as divergence (km, default 1000)")
     parser.add_argument("--no-plots", action="store_true", help="do not draw figures")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -100,7 +101,7 @@ def parse_filters(text: str | None) -> tuple[str, ...]:
     keys = [n.strip().lower() for n in text.split(",") if n.strip()]
     unknown = [k for k in keys if k not in ALIASES]
     if unknown or not keys:
-        raise SystemExit(f"unknown filter(s) {unknown}; known: "
+        raise ValueError(f"--filters: unknown filter(s) {unknown}; known: "
                          + ", ".join(f"{k} = {v}" for k, v in ALIASES.items()))
     return tuple(dict.fromkeys(ALIASES[k] for k in keys))
 
@@ -109,7 +110,7 @@ def parse_cases(text: str) -> tuple[str, ...]:
     cases = tuple(c.strip() for c in text.split(",") if c.strip())
     bad = [c for c in cases if c not in CASES]
     if bad or not cases:
-        raise SystemExit(f"cases must be among {CASES}, got {text!r}")
+        raise ValueError(f"--cases must be among {CASES}, got {text!r}")
     return cases
 
 
@@ -383,17 +384,18 @@ def draw_figures(report: dict, figures: dict, out: Path) -> list[Path]:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = argparse.ArgumentParser(prog="gpf-nav montecarlo", description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = CommandParser(prog="gpf-nav montecarlo", description=__doc__.split("\n\n")[0],
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
     add_common_arguments(parser, runs=100)
     parser.add_argument("--out", type=Path, default=Path("montecarlo-results"),
                         help="output directory (default ./montecarlo-results)")
     args = parser.parse_args(argv)
-    if args.runs < 1:
-        parser.error("--runs must be positive")
-    config = base_config(args)
-    filters = parse_filters(args.filters)
-    cases = parse_cases(args.cases)
+    try:
+        config = base_config(args)
+        filters = parse_filters(args.filters)
+        cases = parse_cases(args.cases)
+    except (ValueError, OSError) as err:
+        parser.error(str(err))
     commit = git_commit()  # the code this process runs; read before a long campaign
     start = time.perf_counter()
     report, figures = campaign(config, cases, args.runs, args.seed, filters, args.particles,

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gpf_nav.cli import CommandParser
 from gpf_nav.experiments import metrics
 from gpf_nav.experiments.montecarlo import (add_common_arguments, base_config, git_commit, parse_cases,
                                             parse_filters,
@@ -114,8 +115,8 @@ def markdown(report: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = argparse.ArgumentParser(prog="gpf-nav sweep", description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = CommandParser(prog="gpf-nav sweep", description=__doc__.split("\n\n")[0],
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--param", required=True, choices=sorted(PARAMETERS), help="what to sweep")
     parser.add_argument("--values", default=None,
                         help="comma-separated values (default: see the description of --param)")
@@ -123,16 +124,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=Path("sweep-results"),
                         help="output directory (default ./sweep-results)")
     args = parser.parse_args(argv)
-    if args.runs < 1:
-        parser.error("--runs must be positive")
     field, defaults, label = PARAMETERS[args.param]
-    values = [float(v) for v in args.values.split(",")] if args.values else list(defaults)
-    config = base_config(args)
+    try:
+        values = [float(v) for v in args.values.split(",")] if args.values else list(defaults)
+    except ValueError:
+        parser.error(f"--values must be comma-separated numbers, got {args.values!r}")
+    try:
+        config = base_config(args)
+        cases, filters = parse_cases(args.cases), parse_filters(args.filters)
+    except (ValueError, OSError) as err:
+        parser.error(str(err))
     commit = git_commit()  # the code this process runs; read before a long campaign
     start = time.perf_counter()
-    report = sweep(args.param, values, config, parse_cases(args.cases), args.runs, args.seed,
-                   parse_filters(args.filters), args.particles, args.divergence_km, args.workers,
-                   args.scheduler, not args.no_progress)
+    report = sweep(args.param, values, config, cases, args.runs, args.seed, filters, args.particles,
+                   args.divergence_km, args.workers, args.scheduler, not args.no_progress)
     wall = time.perf_counter() - start
     report["meta"] = run_metadata(args, wall, ["sweep"] + argv, commit)
     args.out.mkdir(parents=True, exist_ok=True)

@@ -41,14 +41,16 @@ def _typestore():
     return get_typestore(Stores.ROS2_JAZZY)
 
 
-def qos_profile(reliable: bool, depth: int):
-    """A rosbag2 offered QoS profile: keep-last ``depth``, volatile, reliable or best effort."""
+def qos_profile(reliable: bool, depth: int, transient_local: bool = False):
+    """A rosbag2 offered QoS profile: keep-last ``depth``, reliable or best effort, volatile or (latched)
+    transient local."""
     from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness, QosReliability,
                                     QosTime)
     infinite = QosTime(*INFINITE)
     return Qos(QosHistory.KEEP_LAST, depth,
                QosReliability.RELIABLE if reliable else QosReliability.BEST_EFFORT,
-               QosDurability.VOLATILE, infinite, infinite, QosLiveliness.AUTOMATIC, infinite, False)
+               QosDurability.TRANSIENT_LOCAL if transient_local else QosDurability.VOLATILE, infinite, infinite,
+               QosLiveliness.AUTOMATIC, infinite, False)
 
 
 class BagWriter:

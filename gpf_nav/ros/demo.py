@@ -9,25 +9,29 @@ message), mean ESS and the messages processed. All traffic goes over DDS, so set
 """
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import time
 
 import numpy as np
 
+from gpf_nav.cli import CommandParser, positive_float, positive_int
+from gpf_nav.ros.factory import FILTERS, make_filter
+from gpf_nav.scenario import ScenarioConfig, filter_model
 
-def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="gpf-nav demo", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--filter", default="gpf", help="gpf | spf | ekf | ukf | enkf (default gpf)")
-    ap.add_argument("--particles", type=int, default=500, help="N (default 500)")
-    ap.add_argument("--duration", type=float, default=300.0, help="simulated seconds (default 300)")
-    ap.add_argument("--rate-factor", type=float, default=20.0, help="simulated s per wall s (default 20)")
+
+def _parser() -> CommandParser:
+    ap = CommandParser(prog="gpf-nav demo", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--filter", default="gpf", choices=FILTERS, help="gpf | spf | ekf | ukf | enkf (default gpf)")
+    ap.add_argument("--particles", type=positive_int, default=500, help="N (default 500)")
+    ap.add_argument("--duration", type=positive_float, default=300.0, help="simulated seconds (default 300)")
+    ap.add_argument("--rate-factor", type=positive_float, default=20.0, help="simulated s per wall s (default 20)")
     ap.add_argument("--seed", type=int, default=0, help="scenario seed (default 0)")
     ap.add_argument("--case", default="full", choices=("full", "partial"), help="measurement case")
     ap.add_argument("--init", default="prior", choices=("prior", "measurements"),
-                    help="initialise from the scenario prior (parameters) or from the first measurements")
-    ap.add_argument("--timeout", type=float, default=None, help="wall-clock limit, s (default: generous)")
+                    help="initialise from the prior the simulator hands over (set_state) or from the first "
+                         "measurements")
+    ap.add_argument("--timeout", type=positive_float, default=None, help="wall-clock limit, s (default: generous)")
     ap.add_argument("--json", action="store_true", help="print the summary as JSON")
     return ap
 
@@ -57,16 +61,14 @@ def run(args) -> dict:
             Parameter("scenario.case", value=args.case),
             Parameter("seed", value=int(args.seed)),
             Parameter("start_delay", value=1.0),
+            Parameter("hand_over_prior", value=args.init == "prior"),
+            Parameter("truth_rate", value=0.0),  # truth at the measurement stamps only: what the summary uses
         ])
         nodes.append(sim)
-        overrides = [Parameter("use_sim_time", value=True), Parameter("filter", value=args.filter),
-                     Parameter("n_particles", value=int(args.particles))]
-        if args.init == "prior":
-            prior_std = np.sqrt(np.diag(sim.scenario.prior_cov))
-            overrides += [Parameter("initial_state", value=[float(v) for v in sim.scenario.prior_mean]),
-                          Parameter("initial_std", value=[float(v) for v in prior_std]),
-                          Parameter("initial_stamp", value=sim.params["start_time"])]
-        est = EstimatorNode(context=context, parameter_overrides=overrides)
+        est = EstimatorNode(context=context, parameter_overrides=[
+            Parameter("use_sim_time", value=True), Parameter("filter", value=args.filter),
+            Parameter("n_particles", value=int(args.particles)),
+            Parameter("queue_depth", value=1000)])  # one process: a slow spin delays messages, none is shed
         nodes.append(est)
         listener = rclpy.create_node("gpf_demo_summary", context=context)
         nodes.append(listener)
@@ -83,11 +85,11 @@ def run(args) -> dict:
 
         listener.create_subscription(Odometry, "odometry/filtered",
                                      lambda m: estimates.__setitem__(stamp_to_ns(m.header.stamp),
-                                                                     odometry_state(m)), 100)
+                                                                     odometry_state(m)), 1000)
         listener.create_subscription(Odometry, "truth/odometry",
                                      lambda m: truth.__setitem__(stamp_to_ns(m.header.stamp),
-                                                                 odometry_state(m)), 100)
-        listener.create_subscription(Float64, "gpf/ess", lambda m: ess.append(m.data), 100)
+                                                                 odometry_state(m)), 1000)
+        listener.create_subscription(Float64, "gpf/ess", lambda m: ess.append(m.data), 1000)
         listener.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 10)
         for node in nodes:
             executor.add_node(node)
@@ -97,8 +99,16 @@ def run(args) -> dict:
         deadline = start + timeout
         while time.monotonic() < deadline and not sim.finished:
             executor.spin_once(timeout_sec=0.05)
-        linger = time.monotonic() + 1.5  # last messages and one more /diagnostics
-        while time.monotonic() < min(linger, deadline):
+        counters = est.engine.counters
+
+        def settled() -> bool:  # every measurement handled by the estimator, and reported
+            handled = counters.accepted["rae"] + sum(n for (stream, _), n in counters.rejected_by_stream.items()
+                                                     if stream == "rae")
+            return (handled >= sim.published["measurement"]
+                    and last_diag.get("measurements accepted") == str(counters.accepted["rae"]))
+
+        linger = time.monotonic() + 30.0  # the last messages and one more /diagnostics (a busy machine is slow)
+        while time.monotonic() < min(linger, deadline) and not (sim.finished and settled()):
             executor.spin_once(timeout_sec=0.05)
         wall = time.monotonic() - start
 
@@ -106,7 +116,6 @@ def run(args) -> dict:
         err = np.array([estimates[k] - truth[k] for k in common]) if common else np.zeros((0, 6))
         pos = np.linalg.norm(err[:, :3], axis=1) if len(err) else np.zeros(0)
         vel = np.linalg.norm(err[:, 3:], axis=1) if len(err) else np.zeros(0)
-        counters = est.engine.counters
         summary = {
             "completed": bool(sim.finished),
             "filter": args.filter,
@@ -157,6 +166,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.case == "partial" and args.init == "measurements":
         parser.error("--init measurements needs range, azimuth and elevation (--case full); "
                      "the partial case never measures azimuth")
+    try:  # the estimator's own check of the filter options, before anything starts
+        make_filter(args.filter, filter_model(ScenarioConfig()), n_particles=args.particles)
+    except ValueError as err:
+        parser.error(str(err))
     summary = run(args)
     if args.json:
         print(json.dumps(summary, indent=2))

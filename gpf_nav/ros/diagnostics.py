@@ -99,7 +99,7 @@ def filter_status(engine, now_ns: int | None, thresholds: Thresholds, filter_nam
         ("last measurement age", _fmt(age) if age is not None else "none yet"),
         ("reinitializations", str(engine.reinit_count)),
     ]
-    for stream in ("rae", "range", "imu", "set_pose"):
+    for stream in ("rae", "range", "imu", "set_state", "set_pose"):
         values.append((f"accepted {stream}", str(c.accepted[stream])))
     for reason in REASONS:
         values.append((f"rejected {reason}", str(c.rejected[reason])))

@@ -9,8 +9,9 @@ of ROS time. Rules:
   none when there is no such sample within ``imu_timeout`` s before ``t``). Stamps older than the last processed measurement are
   refused (``stale_stamp``), more than ``max_future`` s ahead of the node clock too (``future_stamp``).
 * Initialisation, first match wins: the ``initial_state`` parameter (at ``initial_stamp``, or at the
-  first measurement when that is negative); a ``set_pose`` message; else the first ``init_window``
-  measurements through :func:`gpf_nav.ros.initialization.batch_initial_state`.
+  first measurement when that is negative); a ``set_state`` (full state) or ``set_pose`` (position)
+  message; else the first ``init_window`` measurements through
+  :func:`gpf_nav.ros.initialization.batch_initial_state`.
 * Predictions between measurements (:meth:`extrapolate`) run on a copy of the filter, so they never
   move the filter's own time: a measurement that arrives late (but newer than the last one) is used.
 * If the filter raises or its mean/covariance become non-finite, it is rebuilt from the last good
@@ -257,7 +258,7 @@ class EstimatorEngine:
     def waiting_for(self) -> str:
         """What the uninitialised engine waits for, in words (for the node's periodic warning)."""
         buffered, window = len(self._init_buffer), max(2, int(self.config.init_window))
-        text = f"waiting for set_pose or measurements ({buffered}/{window} buffered)"
+        text = f"waiting for set_state, set_pose or measurements ({buffered}/{window} buffered)"
         if self.init_failures:
             text += (f"; the batch fit failed {self.init_failures} times: it needs at least two "
                      "measurements with range, azimuth and elevation (set initial_state or send set_pose)")
@@ -274,14 +275,35 @@ class EstimatorEngine:
         self.counters.accept("imu")
         return True, ""
 
+    def set_state(self, stamp_ns: int, mean: np.ndarray, cov: np.ndarray, now_ns: int | None) -> tuple[bool, str]:
+        """(Re-)initialise at ``stamp_ns`` with a full state ``mean`` ``(n,)`` and covariance ``cov``
+        ``(n, n)``: a state handed over (the simulator's prior; a vehicle's pre-descent state)."""
+        ok, reason = self._check_reinit_timing("set_state", stamp_ns, now_ns)
+        return self._reinitialize("set_state", stamp_ns, mean, cov) if ok else (ok, reason)
+
+    def _check_reinit_timing(self, stream: str, stamp_ns: int, now_ns: int | None) -> tuple[bool, str]:
+        ok, reason = check_timing(stamp_ns, self.last_measurement_ns, now_ns,
+                                  int(self.config.max_future * NS))
+        if not ok:
+            self.counters.reject(stream, reason)
+        return ok, reason
+
+    def _reinitialize(self, stream: str, stamp_ns: int, mean: np.ndarray, cov: np.ndarray) -> tuple[bool, str]:
+        try:
+            self._initialize(np.asarray(mean, dtype=float), np.asarray(cov, dtype=float), stamp_ns, stream)
+        except Exception:  # noqa: BLE001 - e.g. a covariance the filter cannot factor
+            self.counters.reject(stream, "non_finite")
+            return False, "non_finite"
+        self.last_measurement_ns = max(stamp_ns, self.last_measurement_ns or 0)
+        self.counters.accept(stream)
+        return True, ""
+
     def set_pose(self, stamp_ns: int, position: np.ndarray, position_cov: np.ndarray | None,
                  now_ns: int | None) -> tuple[bool, str]:
         """(Re-)initialise at ``stamp_ns`` with the given position; velocity from the current estimate,
         else from the ``initial_state`` parameter. ``position_cov`` None: ``initial_std``'s."""
-        ok, reason = check_timing(stamp_ns, self.last_measurement_ns, now_ns,
-                                  int(self.config.max_future * NS))
+        ok, reason = self._check_reinit_timing("set_pose", stamp_ns, now_ns)
         if not ok:
-            self.counters.reject("set_pose", reason)
             return False, reason
         n = self.model.state_dim
         p, v = list(self.model.position_index), list(self.model.velocity_index)
@@ -303,14 +325,7 @@ class EstimatorEngine:
         mean[p] = position
         if position_cov is not None:
             cov[np.ix_(p, p)] = position_cov
-        try:
-            self._initialize(mean, cov, stamp_ns, "set_pose")
-        except Exception:  # noqa: BLE001 - e.g. a covariance the filter cannot factor
-            self.counters.reject("set_pose", "non_finite")
-            return False, "non_finite"
-        self.last_measurement_ns = max(stamp_ns, self.last_measurement_ns or 0)
-        self.counters.accept("set_pose")
-        return True, ""
+        return self._reinitialize("set_pose", stamp_ns, mean, cov)
 
     def _input_at(self, stamp_ns: int) -> np.ndarray | None:
         for t, u in reversed(self._imu):

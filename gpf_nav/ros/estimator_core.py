@@ -35,7 +35,8 @@ from gpf_nav.ros.params import ParameterError
 LOG_THROTTLE = 5.0  # s (wall clock) between two log lines about the same refusal reason
 
 INPUT_TOPICS = {"measurements/rae": ("rae", Vector3Stamped), "measurements/range": ("range", Range),
-                "imu": ("imu", Imu), "set_pose": ("set_pose", PoseWithCovarianceStamped)}
+                "imu": ("imu", Imu), "set_pose": ("set_pose", PoseWithCovarianceStamped),
+                "set_state": ("set_state", Odometry)}
 """topic -> (stream name used in the counters, message type)."""
 
 OUTPUT_TOPICS = {"odometry/filtered": Odometry, "gpf/ess": Float64, "gpf/costate": Vector3Stamped,
@@ -173,7 +174,7 @@ class EstimatorCore:
         self.logger = logger
         self.wants_particles = wants_particles
         self._handlers = {"rae": self._on_rae, "range": self._on_range, "imu": self._on_imu,
-                          "set_pose": self._on_set_pose}
+                          "set_pose": self._on_set_pose, "set_state": self._on_set_state}
         self._last_log: dict[str, float] = {}
         self._integrity_level = "OK"
         self._last_published_ns: int | None = None
@@ -184,12 +185,14 @@ class EstimatorCore:
         p = self.params
         return (f"{self.filter_name} estimator up: N={p['n_particles']}, world_frame={p['world_frame']}, "
                 f"initialisation from " + ("parameters" if p["initial_state"] is not None else
-                                           f"set_pose or the first {p['init_window']} measurements"))
+                                           f"set_state, set_pose or the first {p['init_window']} "
+                                           "measurements"))
 
     # --- inputs ----------------------------------------------------------------------------------------
     def handle(self, stream: str, msg, now_ns: int) -> None:
-        """Process one message of ``stream`` (``rae``, ``range``, ``imu``, ``set_pose``) received at node
-        time ``now_ns``. An unexpected exception is counted (``internal_error``) and logged, never raised."""
+        """Process one message of ``stream`` (``rae``, ``range``, ``imu``, ``set_pose``, ``set_state``)
+        received at node time ``now_ns``. An unexpected exception is counted (``internal_error``) and
+        logged, never raised."""
         try:
             self._handlers[stream](msg, now_ns)
         except Exception as err:  # noqa: BLE001 - the last-resort net: the estimator goes on
@@ -311,13 +314,38 @@ class EstimatorCore:
         if not ok:
             self._refuse("set_pose", reason, f"position ({pos.x}, {pos.y}, {pos.z}) or covariance")
             return
-        if not np.any(cov) or np.linalg.eigvalsh(0.5 * (cov + cov.T)).min() <= 0.0:
-            cov = None  # not given or not positive definite: initial_std
-        ok, reason = self.engine.set_pose(stamp, np.array([pos.x, pos.y, pos.z]), cov, now_ns)
-        if not ok:
-            self._refuse("set_pose", reason, self._timing_detail(stamp, now_ns), counted=True)
+        ok, reason = self.engine.set_pose(stamp, np.array([pos.x, pos.y, pos.z]), _positive_definite(cov), now_ns)
+        self._initialized_from("set_pose", stamp, ok, reason, now_ns)
+
+    def _on_set_state(self, msg: Odometry, now_ns: int) -> None:
+        stamp = self._check_header("set_state", msg.header, self.params["world_frame"])
+        if stamp is None:
             return
-        self.logger.info(f"initialised from set_pose at {stamp * 1e-9:.3f} s")
+        if stamp == 0:
+            stamp = now_ns
+        state = conv.odometry_state(msg)
+        pos_cov = conv.position_covariance(msg.pose.covariance)
+        vel_cov = conv.position_covariance(msg.twist.covariance)  # the linear block, as for the pose
+        ok, reason = val.check_finite(*state, *pos_cov.reshape(-1), *vel_cov.reshape(-1))
+        if not ok:
+            self._refuse("set_state", reason, f"state {state.tolist()} or covariance")
+            return
+        m = self.model
+        p, v = list(m.position_index), list(m.velocity_index)
+        mean = np.zeros(m.state_dim)
+        mean[p], mean[v] = state[:3], state[3:]
+        cov = np.diag(np.asarray(self.params["initial_std"]) ** 2)
+        for index, block in ((p, _positive_definite(pos_cov)), (v, _positive_definite(vel_cov))):
+            if block is not None:
+                cov[np.ix_(index, index)] = block
+        ok, reason = self.engine.set_state(stamp, mean, cov, now_ns)
+        self._initialized_from("set_state", stamp, ok, reason, now_ns)
+
+    def _initialized_from(self, stream: str, stamp: int, ok: bool, reason: str, now_ns: int) -> None:
+        if not ok:
+            self._refuse(stream, reason, self._timing_detail(stamp, now_ns), counted=True)
+            return
+        self.logger.info(f"initialised from {stream} at {stamp * 1e-9:.3f} s")
         self._publish(stamp, self.engine.mean, self.engine.cov, update=False)
 
     # --- outputs ---------------------------------------------------------------------------------------
@@ -340,7 +368,8 @@ class EstimatorCore:
         if self.engine.has_costate:
             lam = np.asarray(f.costate_mean, dtype=float)
             if np.all(np.isfinite(lam)):
-                self.publish("gpf/costate", conv.vector3_stamped(lam, stamp, p["measurement_frame"] or p["world_frame"]))
+                self.publish("gpf/costate",
+                             conv.vector3_stamped(lam, stamp, p["measurement_frame"] or p["world_frame"]))
         k = p["max_published_particles"]
         if k > 0 and hasattr(f, "particles") and self.wants_particles():
             particles = np.asarray(f.particles)
@@ -378,3 +407,10 @@ class EstimatorCore:
         if not self.engine.initialized and self._throttled("_not_initialized"):
             self.logger.warning(f"filter not initialised: no odometry yet; {self.engine.waiting_for()}")
         return level, message
+
+
+def _positive_definite(cov: np.ndarray) -> np.ndarray | None:
+    """``cov`` if it is positive definite, else None (not given, or unusable: ``initial_std`` applies)."""
+    if not np.any(cov) or np.linalg.eigvalsh(0.5 * (cov + cov.T)).min() <= 0.0:
+        return None
+    return cov

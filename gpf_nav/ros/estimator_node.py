@@ -16,12 +16,12 @@ import rclpy.exceptions
 import rclpy.logging
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
 
 from gpf_nav.allocator import retain_freed_memory
+from gpf_nav.ros import shutdown
 from gpf_nav.ros.estimator_core import INPUT_TOPICS, OUTPUT_TOPICS, EstimatorCore
 from gpf_nav.ros.factory import FILTERS
 from gpf_nav.ros.params import ESTIMATOR, ParameterError, declare
@@ -46,9 +46,11 @@ class EstimatorNode(Node):
                                 depth=p["queue_depth"], durability=DurabilityPolicy.VOLATILE)
         reliable = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                               depth=10)
+        handover = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=1,
+                              durability=DurabilityPolicy.TRANSIENT_LOCAL)  # a late joiner gets the last one
+        qos = {"set_pose": reliable, "set_state": handover}
         for topic, (stream, msg_type) in INPUT_TOPICS.items():
-            self.create_subscription(msg_type, topic, self._callback(stream),
-                                     reliable if stream == "set_pose" else sensor_qos)
+            self.create_subscription(msg_type, topic, self._callback(stream), qos.get(stream, sensor_qos))
         self._publishers_by_topic = {topic: self.create_publisher(msg_type, topic, reliable)
                                      for topic, msg_type in OUTPUT_TOPICS.items()}
         self.create_service(Trigger, "~/reset", self._on_reset)
@@ -96,9 +98,10 @@ class EstimatorNode(Node):
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Console script ``estimator``: returns 2 (after a FATAL log line) on invalid parameters."""
+    """Console script ``estimator``: returns 2 (after a FATAL log line) on invalid parameters, 0 when
+    stopped by SIGINT or SIGTERM (:mod:`gpf_nav.ros.shutdown`)."""
     retain_freed_memory()
-    rclpy.init(args=sys.argv if argv is None else argv)
+    stop = shutdown.init_without_signal_handlers(sys.argv if argv is None else argv)
     try:
         node = EstimatorNode()
     except (ParameterError, rclpy.exceptions.InvalidParameterTypeException,
@@ -107,12 +110,9 @@ def main(argv: list[str] | None = None) -> int:
         rclpy.try_shutdown()
         return 2
     try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        shutdown.spin_until(node, stop)
     finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+        shutdown.close(node)
     return 0
 
 

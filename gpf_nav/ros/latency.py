@@ -27,18 +27,34 @@ import time
 
 import numpy as np
 
+from gpf_nav.cli import CommandParser, positive_float
+from gpf_nav.ros.factory import FILTERS
+
 DEFAULT_RATES = (10.0, 50.0, 200.0)
 DEFAULT_PARTICLES = (500, 10000)
 
 
-def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="gpf-nav bench --node", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--rates", default=",".join(f"{r:g}" for r in DEFAULT_RATES),
+def _positive_list(kind):
+    """argparse type: a comma list of positive ``kind`` values."""
+    def parse(text: str) -> tuple:
+        try:
+            values = tuple(kind(v) for v in text.split(","))
+        except ValueError:
+            values = ()
+        if not values or min(values) <= 0:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a comma list of positive numbers")
+        return values
+    return parse
+
+
+def _parser() -> CommandParser:
+    ap = CommandParser(prog="gpf-nav bench --node", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--rates", type=_positive_list(float), default=",".join(f"{r:g}" for r in DEFAULT_RATES),
                     help="input rates in Hz, comma-separated (default 10,50,200)")
-    ap.add_argument("--particles", default=",".join(str(n) for n in DEFAULT_PARTICLES),
+    ap.add_argument("--particles", type=_positive_list(int), default=",".join(str(n) for n in DEFAULT_PARTICLES),
                     help="particle counts, comma-separated (default 500,10000)")
-    ap.add_argument("--seconds", type=float, default=5.0, help="wall seconds of input per rate (default 5)")
-    ap.add_argument("--filter", default="gpf", help="estimator filter (default gpf)")
+    ap.add_argument("--seconds", type=positive_float, default=5.0, help="wall seconds of input per rate (default 5)")
+    ap.add_argument("--filter", default="gpf", choices=FILTERS, help="estimator filter (default gpf)")
     ap.add_argument("--warmup", type=int, default=20, help="messages sent (at 10 Hz) and discarded first")
     ap.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: the environment's)")
     ap.add_argument("--json", action="store_true", help="print the results as JSON")
@@ -109,8 +125,8 @@ def run(args) -> list[dict]:
 
     from gpf_nav.scenario import ScenarioConfig, generate
 
-    rates = [float(r) for r in str(args.rates).split(",") if r]
-    particles = [int(n) for n in str(args.particles).split(",") if n]
+    rates = [float(r) for r in args.rates]
+    particles = [int(n) for n in args.particles]
     env = dict(os.environ)
     if args.domain_id is not None:
         env["ROS_DOMAIN_ID"] = str(args.domain_id)

@@ -5,10 +5,14 @@ The same parameters (``config/simulator.yaml``, ``-p name:=value``), events
 as ``ros2 run gpf_nav simulator`` with ``publish_clock: true`` at ``rate_factor`` 1, only as fast as the
 disk allows:
 
-* ``/measurements/rae``, ``/imu``, ``/truth/odometry`` stamped ``start_time`` + trajectory time;
+* ``/measurements/rae``, ``/imu``, ``/truth/odometry`` stamped ``start_time`` + trajectory time
+  (``start_time`` negative, the default: the wall-clock time when the recording starts);
 * ``/clock`` every ``1 / clock_rate`` s of simulated time, before the events of the same time;
+* ``/set_state``, the scenario's prior handed over at the trajectory start (unless ``hand_over_prior``
+  is false), right after the first ``/clock``;
 * each message's recording time is its stamp (``/clock``: its time); each topic's offered QoS is the
-  simulator's (reliable, keep last 50, volatile), so ``ros2 bag play`` publishes it the same way.
+  simulator's (reliable, keep last 1000, volatile; ``/set_state`` keep last 1, transient local), so
+  ``ros2 bag play`` publishes it the same way.
 
 Play it with ``ros2 bag play OUT`` and run the subscribers with ``use_sim_time:=true`` (the bag carries
 ``/clock``; do not add ``--clock``). Exit status 2, after one line on stderr, on invalid parameters or an
@@ -16,20 +20,20 @@ existing ``OUT``.
 """
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 
+from gpf_nav.cli import CommandParser, positive_float
 from gpf_nav.ros.bag import STORAGES, BagError, BagWriter, absolute, qos_profile
 from gpf_nav.ros.params import ParameterError, parameters_from_files, simulator_specs
 
 CLOCK_TOPIC = "/clock"
 
 
-def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="gpf-nav record", description=__doc__.split("\n\n")[0])
+def _parser() -> CommandParser:
+    ap = CommandParser(prog="gpf-nav record", description=__doc__.split("\n\n")[0])
     ap.add_argument("out", metavar="OUT", help="bag directory to create")
-    ap.add_argument("--duration", type=float, help="simulated seconds (scenario.duration; default 2400)")
+    ap.add_argument("--duration", type=positive_float, help="simulated seconds (scenario.duration; default 2400)")
     ap.add_argument("--case", choices=("full", "partial"), help="measurement case (scenario.case; default full)")
     ap.add_argument("--seed", type=int, help="scenario seed (default 0)")
     ap.add_argument("--storage", choices=STORAGES, default="mcap", help="rosbag2 storage (default mcap)")
@@ -53,12 +57,13 @@ def simulator_parameters(args) -> dict:
 
 def record(out: str, p: dict, storage: str = "mcap") -> dict:
     """Write the scenario of simulator parameters ``p`` to the bag ``out``; returns counts per topic."""
+    from nav_msgs.msg import Odometry
     from rosgraph_msgs.msg import Clock
 
     from gpf_nav.ros import conversions as conv
     from gpf_nav.ros.playback import NS, build_events
-    from gpf_nav.ros.simulator_node import (EVENT_TOPICS, QOS_DEPTH, check_simulator_parameters,
-                                            event_message, scenario_from_parameters)
+    from gpf_nav.ros.simulator_node import (EVENT_TOPICS, HANDOVER_TOPIC, QOS_DEPTH, check_simulator_parameters,
+                                            event_message, handover_message, scenario_from_parameters)
     errors = check_simulator_parameters(p)
     if not errors:
         try:
@@ -68,14 +73,19 @@ def record(out: str, p: dict, storage: str = "mcap") -> dict:
     if errors:
         raise ParameterError("invalid parameters: " + "; ".join(errors))
     events = build_events(scenario, p["imu_rate"], p["imu_noise_std"], p["truth_rate"], p["seed"])
-    epoch = int(round(p["start_time"] * 1e9))
+    epoch = int(round(p["start_time"] * NS)) if p["start_time"] >= 0.0 else time.time_ns()
     span = max(e.t_ns for e in events)
     period = int(round(NS / p["clock_rate"]))
     qos = qos_profile(reliable=True, depth=QOS_DEPTH)
     topics = {absolute(topic): (msg_type, qos) for topic, msg_type in EVENT_TOPICS.values()}
     topics[CLOCK_TOPIC] = (Clock, qos)
+    if p["hand_over_prior"]:
+        topics[absolute(HANDOVER_TOPIC)] = (Odometry, qos_profile(reliable=True, depth=1, transient_local=True))
     with BagWriter(out, storage, topics) as bag:
-        tick = 0
+        bag.write(CLOCK_TOPIC, Clock(clock=conv.ns_to_stamp(epoch)), epoch)
+        if p["hand_over_prior"]:
+            bag.write(absolute(HANDOVER_TOPIC), handover_message(scenario, epoch, p), epoch)
+        tick = period
         for event in events + [None]:
             until = span if event is None else event.t_ns
             while tick <= until:

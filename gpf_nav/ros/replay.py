@@ -4,7 +4,8 @@ The estimator node's own message handling (:class:`gpf_nav.ros.estimator_core.Es
 parameters, checks, counters and outputs) is fed the bag's messages in recording order, with no ROS
 graph and no waiting:
 
-* inputs: the node's topics ``measurements/rae``, ``measurements/range``, ``imu``, ``set_pose``, plus
+* inputs: the node's topics ``measurements/rae``, ``measurements/range``, ``imu``, ``set_pose``,
+  ``set_state`` (the prior ``gpf-nav record`` writes at the start, as the simulator hands it over), plus
   ``truth/odometry`` for the evaluation; each remappable (``--remap measurements/rae:=/tracking/rae``);
 * time: header stamps drive the filter, as in the node. The node clock (the ``future_stamp`` check,
   ``set_pose`` with a zero stamp, the ``publish_rate`` timer, diagnostics ages) is each message's
@@ -25,7 +26,6 @@ parameters, an unreadable or truncated bag, a topic of the wrong type, or no mea
 """
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import shutil
@@ -38,6 +38,7 @@ import numpy as np
 from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
 
+from gpf_nav.cli import CommandParser
 from gpf_nav.ros.bag import (STORAGES, BagError, BagReader, BagWriter, absolute, deserialize,
                              header_stamp_ns, qos_profile, type_name)
 from gpf_nav.ros.conversions import odometry_state, stamp_to_ns
@@ -59,8 +60,8 @@ class ReplayError(Exception):
     """A replay that cannot run (one-line message): bad remapping, wrong topic types, nothing to estimate."""
 
 
-def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="gpf-nav replay", description=__doc__.split("\n\n")[0])
+def _parser() -> CommandParser:
+    ap = CommandParser(prog="gpf-nav replay", description=__doc__.split("\n\n")[0])
     ap.add_argument("bag", metavar="BAG", help="rosbag2 bag directory (MCAP or sqlite3)")
     ap.add_argument("--out", required=True, metavar="DIR", help="output directory (created)")
     ap.add_argument("--remap", action="append", default=[], metavar="FROM:=TO",

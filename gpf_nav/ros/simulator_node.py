@@ -5,7 +5,9 @@ Generates the truth with the core scenario generator (or replays a CSV truth, pa
 ``/clock``. A wall-clock loop at ``clock_rate`` Hz advances simulated time by ``rate_factor`` times
 the elapsed wall time, publishes ``/clock`` and releases every event of :mod:`gpf_nav.ros.playback`
 due by then, with the event's own stamp; so message contents never depend on timing: same seed, same
-messages. See ``docs/ros.md``.
+messages. By default simulated time starts at the wall-clock time (``start_time`` negative), so at
+``rate_factor`` 1 an estimator on the wall clock accepts the stamps, and the mission's prior is handed
+over on ``set_state`` (latched) when the trajectory starts. See ``docs/ros.md``.
 """
 from __future__ import annotations
 
@@ -20,13 +22,13 @@ import rclpy.logging
 from geometry_msgs.msg import Vector3Stamped
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Imu
 
 from gpf_nav.ros import conversions as conv
+from gpf_nav.ros import shutdown
 from gpf_nav.ros.params import ParameterError, declare, simulator_specs
 from gpf_nav.ros.playback import NS, build_events
 
@@ -48,8 +50,11 @@ def scenario_from_parameters(p: dict):
 EVENT_TOPICS = {"measurement": ("measurements/rae", Vector3Stamped), "truth": ("truth/odometry", Odometry),
                 "imu": ("imu", Imu)}
 """Event kind of :mod:`gpf_nav.ros.playback` -> (topic, message type); ``/clock`` besides."""
-QOS_DEPTH = 50
-"""Depth of the simulator's reliable publishers (all topics, ``/clock`` too)."""
+QOS_DEPTH = 1000
+"""Depth of the simulator's reliable publishers (all topics, ``/clock`` too): a subscriber stalled for
+seconds at a high ``rate_factor`` (a busy machine) receives every message late rather than losing some."""
+HANDOVER_TOPIC = "set_state"
+"""The topic of the mission's prior (:func:`handover_message`), latched: transient local, depth 1."""
 
 
 def event_message(event, stamp_ns: int, p: dict) -> tuple[str, object]:
@@ -70,11 +75,18 @@ def event_message(event, stamp_ns: int, p: dict) -> tuple[str, object]:
     return "imu", msg
 
 
+def handover_message(scenario, stamp_ns: int, p: dict) -> Odometry:
+    """The scenario's prior (mean, covariance) as handed over on ``set_state`` at ``stamp_ns``."""
+    return conv.odometry_msg(scenario.prior_mean, scenario.prior_cov, stamp_ns, p["world_frame"], p["base_frame"])
+
+
 def check_simulator_parameters(p: dict) -> list[str]:
     errors = []
-    for key in ("imu_rate", "truth_rate", "imu_noise_std", "start_time", "start_delay"):
+    for key in ("imu_rate", "truth_rate", "imu_noise_std", "start_delay"):
         if not (math.isfinite(p[key]) and p[key] >= 0):
             errors.append(f"parameter '{key}' = {p[key]!r} must be >= 0")
+    if not math.isfinite(p["start_time"]):
+        errors.append(f"parameter 'start_time' = {p['start_time']!r} must be finite (negative: the wall-clock time)")
     for key in ("clock_rate", "rate_factor"):
         if not (math.isfinite(p[key]) and p[key] > 0):
             errors.append(f"parameter '{key}' = {p[key]!r} must be positive")
@@ -91,7 +103,7 @@ class SimulatorNode(Node):
         finished: True once the trajectory has ended and ``loop`` is false.
         trajectory_ns: trajectory time reached by the release loop in the current lap [ns] (0 before
             the start).
-        published: messages published per kind (``measurement``, ``imu``, ``truth``, ``clock``).
+        published: messages published per kind (``measurement``, ``imu``, ``truth``, ``clock``, ``handover``).
     """
 
     def __init__(self, name: str = NODE_NAME, **kwargs):
@@ -112,20 +124,24 @@ class SimulatorNode(Node):
             if len(self.scenario.times) > 1 else NS
         self.finished = False
         self.trajectory_ns = 0
-        self.published = {"measurement": 0, "imu": 0, "truth": 0, "clock": 0}
+        self.published = {"measurement": 0, "imu": 0, "truth": 0, "clock": 0, "handover": 0}
         self._index = 0
         self._lap_offset_ns = 0
+        self._handover_due = p["hand_over_prior"]
         self._wall_start = time.monotonic() + p["start_delay"]
-        if p["publish_clock"]:
+        if p["publish_clock"] and p["start_time"] >= 0.0:
             self._epoch_ns = int(round(p["start_time"] * 1e9))
-        else:
-            self._epoch_ns = Clock(clock_type=ClockType.SYSTEM_TIME).now().nanoseconds
+        else:  # the wall-clock time when the trajectory starts
+            self._epoch_ns = Clock(clock_type=ClockType.SYSTEM_TIME).now().nanoseconds + int(p["start_delay"] * NS)
 
         qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                          depth=QOS_DEPTH)
         self._publishers_by_topic = {topic: self.create_publisher(msg_type, topic, qos)
                                      for topic, msg_type in EVENT_TOPICS.values()}
         self.clock_pub = self.create_publisher(ClockMsg, "/clock", qos) if p["publish_clock"] else None
+        latched = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=1,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)  # an estimator started later gets it
+        self.handover_pub = self.create_publisher(Odometry, HANDOVER_TOPIC, latched)
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(1.0 / p["clock_rate"], self._tick, clock=self._steady)
         n_meas = sum(e.kind == "measurement" for e in self.events)
@@ -151,12 +167,20 @@ class SimulatorNode(Node):
             self.published["clock"] += 1
         if target < 0:
             return
+        if self._handover_due:
+            self._hand_over()
         self.trajectory_ns = target
         while self._index < len(self.events) and self.events[self._index].t_ns <= target:
             self._emit(self.events[self._index])
             self._index += 1
         if self._index >= len(self.events):
             self._end_of_trajectory()
+
+    def _hand_over(self) -> None:
+        """The scenario's prior, at the start of the current lap, on ``set_state``."""
+        self.handover_pub.publish(handover_message(self.scenario, self.stamp_ns(0), self.params))
+        self.published["handover"] += 1
+        self._handover_due = False
 
     def _emit(self, event) -> None:
         topic, msg = event_message(event, self.stamp_ns(event.t_ns), self.params)
@@ -166,10 +190,12 @@ class SimulatorNode(Node):
     def _end_of_trajectory(self) -> None:
         end = self.stamp_ns(self.span_ns)
         if self.params["loop"]:
+            then = "the prior is handed over again" if self.params["hand_over_prior"] else "reset the estimator"
             self.get_logger().info(f"trajectory ended at {end * 1e-9:.3f} s; looping (the vehicle jumps back "
-                                   "to the start: reset the estimator)")
+                                   f"to the start: {then})")
             self._lap_offset_ns += self.span_ns + self.period_ns
             self._index = 0
+            self._handover_due = self.params["hand_over_prior"]
             return
         self.finished = True
         self.get_logger().info(f"trajectory ended at {end * 1e-9:.3f} s after {self.published['measurement']} "
@@ -177,8 +203,9 @@ class SimulatorNode(Node):
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Console script ``simulator``: exits 0 at the end of the trajectory, 2 on invalid parameters."""
-    rclpy.init(args=sys.argv if argv is None else argv)
+    """Console script ``simulator``: exits 0 at the end of the trajectory (unless ``loop``) and when
+    stopped by SIGINT or SIGTERM (:mod:`gpf_nav.ros.shutdown`), 2 on invalid parameters."""
+    stop = shutdown.init_without_signal_handlers(sys.argv if argv is None else argv)
     try:
         node = SimulatorNode()
     except (ParameterError, rclpy.exceptions.InvalidParameterTypeException,
@@ -187,16 +214,11 @@ def main(argv: list[str] | None = None) -> int:
         rclpy.try_shutdown()
         return 2
     try:
-        while rclpy.ok() and not node.finished:
-            rclpy.spin_once(node, timeout_sec=0.1)
+        shutdown.spin_until(node, stop, done=lambda: node.finished)
         linger = time.monotonic() + 1.0  # let reliable subscribers receive the last messages
-        while rclpy.ok() and time.monotonic() < linger:
-            rclpy.spin_once(node, timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        shutdown.spin_until(node, stop, done=lambda: time.monotonic() > linger)
     finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+        shutdown.close(node)
     return 0
 
 

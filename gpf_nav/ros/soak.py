@@ -435,7 +435,8 @@ def run(args) -> dict:
                                 Parameter("rate_factor", value=float(args.rate_factor)),
                                 Parameter("scenario.duration", value=float(sim_seconds)),
                                 Parameter("scenario.epsilon", value=float(args.epsilon)),
-                                Parameter("seed", value=int(args.seed)), Parameter("start_delay", value=1.5)])
+                                Parameter("seed", value=int(args.seed)), Parameter("start_delay", value=1.5),
+                                Parameter("hand_over_prior", value=False)])  # it learns from the measurements
         nodes.append(sim)
         executor.add_node(sim)
         injector.start_ns = sim.stamp_ns(int(args.warmup * NS))
