@@ -289,6 +289,29 @@ def test_engine_set_state_is_a_full_handover():
     assert c.accepted["set_state"] == 1 and c.rejected_by_stream[("set_state", "future_stamp")] == 1
 
 
+def test_engine_set_state_older_than_buffered_measurements_starts_the_filter_before_them():
+    """The latched prior delivered just after the first live measurements (an estimator started late):
+    not stale while those are only buffered for the batch fit; the filter starts from the prior and
+    takes them, exactly as if the prior had come first."""
+    s = generate(SHORT, 8)
+    start = 100 * S  # the prior's time (truth[0])
+    late, _ = _engine(s, initial=False)
+    for k in range(2):
+        assert late.measurement(_stamp(s, k), s.measurements[k], _stamp(s, k)) == (True, "buffered")
+    assert late.set_state(start, s.prior_mean, s.prior_cov, _stamp(s, 1)) == (True, "")
+    assert late.init_source == "set_state" and late.t_ns == late.last_update_ns == _stamp(s, 1)
+    first, _ = _engine(s, initial=False)
+    assert first.set_state(start, s.prior_mean, s.prior_cov, start) == (True, "")
+    for k in range(2):
+        assert first.measurement(_stamp(s, k), s.measurements[k], _stamp(s, k)) == (True, "")
+    np.testing.assert_allclose(late.mean, first.mean, rtol=1e-12)
+    np.testing.assert_allclose(late.cov, first.cov, rtol=1e-12)
+    assert late.counters.accepted["rae"] == 2 and late.counters.accepted["set_state"] == 1
+    assert late.measurement(_stamp(s, 2), s.measurements[2], _stamp(s, 2)) == (True, "")
+    # once the filter runs, an older state is stale as before
+    assert late.set_state(start, s.prior_mean, s.prior_cov, _stamp(s, 2)) == (False, "stale_stamp")
+
+
 class _Exploding:
     """Wraps a filter; its estimate turns NaN on the ``after``-th update."""
 

@@ -11,7 +11,10 @@ of ROS time. Rules:
 * Initialisation, first match wins: the ``initial_state`` parameter (at ``initial_stamp``, or at the
   first measurement when that is negative); a ``set_state`` (full state) or ``set_pose`` (position)
   message; else the first ``init_window`` measurements through
-  :func:`gpf_nav.ros.initialization.batch_initial_state`.
+  :func:`gpf_nav.ros.initialization.batch_initial_state`. A ``set_state`` or ``set_pose`` that comes
+  while measurements are buffered for that fit (say the latched prior, delivered just after the first
+  live measurement) is not stale: the filter starts from it and then takes the buffered measurements
+  stamped at or after it.
 * Predictions between measurements (:meth:`extrapolate`) run on a copy of the filter, so they never
   move the filter's own time: a measurement that arrives late (but newer than the last one) is used.
 * If the filter raises or its mean/covariance become non-finite, it is rebuilt from the last good
@@ -202,23 +205,28 @@ class EstimatorEngine:
                                  stamp_ns, "parameters")
             else:
                 return self._buffer(stamp_ns, y, stream)
+        if not self._update(stamp_ns, y):
+            self.counters.reject(stream, "filter_error")
+            return False, "filter_error"
+        self.counters.accept(stream)
+        return True, ""
+
+    def _update(self, stamp_ns: int, y: np.ndarray) -> bool:
+        """Predict to ``stamp_ns`` and update with ``y``; False after a recovery (nothing counted)."""
         try:
             self._predict_to(stamp_ns)
             self.filter.update(y)
         except Exception as err:  # noqa: BLE001 - any filter failure means: recover, never crash the node
             self._recover(stamp_ns, f"filter raised {type(err).__name__}: {err}")
-            self.counters.reject(stream, "filter_error")
-            return False, "filter_error"
+            return False
         if not self._store(stamp_ns):
             self._recover(stamp_ns, "non-finite mean or covariance after the update")
-            self.counters.reject(stream, "filter_error")
-            return False, "filter_error"
+            return False
         if not self._check_core_recovery():
             self._feed_monitor(y)
         self._prev_y = y
         self.last_update_ns = stamp_ns
-        self.counters.accept(stream)
-        return True, ""
+        return True
 
     def _check_core_recovery(self) -> bool:
         """Count a re-initialisation the core filter did by itself (and reset the monitor); True if so."""
@@ -282,13 +290,15 @@ class EstimatorEngine:
         return self._reinitialize("set_state", stamp_ns, mean, cov) if ok else (ok, reason)
 
     def _check_reinit_timing(self, stream: str, stamp_ns: int, now_ns: int | None) -> tuple[bool, str]:
-        ok, reason = check_timing(stamp_ns, self.last_measurement_ns, now_ns,
-                                  int(self.config.max_future * NS))
+        # uninitialised, the measurements buffered for the batch fit have moved no filter state yet
+        last = self.last_measurement_ns if self.initialized else None
+        ok, reason = check_timing(stamp_ns, last, now_ns, int(self.config.max_future * NS))
         if not ok:
             self.counters.reject(stream, reason)
         return ok, reason
 
     def _reinitialize(self, stream: str, stamp_ns: int, mean: np.ndarray, cov: np.ndarray) -> tuple[bool, str]:
+        pending = [] if self.initialized else [(t, y) for t, y in self._init_buffer if t >= stamp_ns]
         try:
             self._initialize(np.asarray(mean, dtype=float), np.asarray(cov, dtype=float), stamp_ns, stream)
         except Exception:  # noqa: BLE001 - e.g. a covariance the filter cannot factor
@@ -296,6 +306,8 @@ class EstimatorEngine:
             return False, "non_finite"
         self.last_measurement_ns = max(stamp_ns, self.last_measurement_ns or 0)
         self.counters.accept(stream)
+        for t, y in pending:  # already counted as accepted when buffered
+            self._update(t, y)
         return True, ""
 
     def set_pose(self, stamp_ns: int, position: np.ndarray, position_cov: np.ndarray | None,

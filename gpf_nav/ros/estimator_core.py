@@ -346,7 +346,8 @@ class EstimatorCore:
             self._refuse(stream, reason, self._timing_detail(stamp, now_ns), counted=True)
             return
         self.logger.info(f"initialised from {stream} at {stamp * 1e-9:.3f} s")
-        self._publish(stamp, self.engine.mean, self.engine.cov, update=False)
+        # at the filter's time: later than stamp when measurements buffered before it were then applied
+        self._publish(self.engine.t_ns, self.engine.mean, self.engine.cov, update=False)
 
     # --- outputs ---------------------------------------------------------------------------------------
     def _publish(self, stamp: int, mean: np.ndarray, cov: np.ndarray, update: bool) -> None:
