@@ -39,9 +39,9 @@ class EnsembleKF(Filter):
         self._noise = ModelNoise(model)
         self.last_log_likelihood = 0.0
 
-    def initialize(self, mean: np.ndarray, cov: np.ndarray) -> None:
+    def initialize(self, mean: np.ndarray, cov: np.ndarray, t0: float = 0.0) -> None:
         """Draw the ``N`` members from ``N(mean (n,), cov (n, n))``."""
-        mean, cov = self._check_prior(mean, cov)
+        mean, cov = self._check_prior(mean, cov, t0)
         z = self.rng.standard_normal(self._X.shape)
         self._X = mean + z @ psd_sqrt(cov).T
         self.last_log_likelihood = 0.0
@@ -55,9 +55,9 @@ class EnsembleKF(Filter):
         if dt == 0.0:
             return
         X = self.model.transition(self._X, dt, self.time, u)
-        self._X = X + self.rng.standard_normal(X.shape) @ self._noise.process_sqrt(dt).T
+        self._X = X + self.rng.standard_normal(X.shape) @ self._noise.process_sqrt(dt, self.time).T
         self.time += dt
-        self._guard()
+        self._guard(updated=False)
 
     def update(self, y: np.ndarray) -> None:
         """Condition on ``y`` ``(m,)``; NaN rows are not measured, an all-NaN ``y`` is a no-op."""
@@ -67,7 +67,7 @@ class EnsembleKF(Filter):
         y, mask = measured
         k = np.count_nonzero(mask)
         model, X = self.model, self._X
-        HX = model.measure(X)
+        HX = model.measure(X, self.time)
         h_mean = model.measurement_mean(HX, self._weights)
         # One residual call gives the anomalies Ay (N, m) of the predicted measurements and, in its last
         # row, the ensemble-mean innovation r (m,).
@@ -87,7 +87,7 @@ class EnsembleKF(Filter):
             return
         innovations += self.rng.standard_normal(innovations.shape) @ self._noise.measurement_sqrt(mask).T
         self._X = X + innovations @ Kt
-        self._guard()
+        self._guard(updated=True)
 
     @property
     def particles(self) -> np.ndarray:

@@ -12,7 +12,7 @@ from scipy.linalg.lapack import dposv, dpotrf
 
 from gpf_nav.filters.base import Filter
 from gpf_nav.linalg import psd_sqrt
-from gpf_nav.models.base import StateSpaceModel
+from gpf_nav.models.base import StateSpaceModel, time_invariant
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -44,26 +44,29 @@ def innovation_solve(S: np.ndarray, B: np.ndarray, r: np.ndarray) -> tuple[np.nd
 class ModelNoise:
     """A model's ``Q(dt)`` and measured-rows block of ``R``, with square roots, computed once and cached.
 
-    The model's noise is taken as fixed after construction: ``Q`` is recomputed only when ``dt`` changes
-    and the ``R`` block only when the set of measured rows changes.
+    ``R`` is taken as fixed after construction: its block is recomputed only when the set of measured
+    rows changes. ``Q`` is recomputed when ``dt`` changes, and when ``t`` changes if the model's
+    ``process_noise`` takes ``t``.
     """
 
     def __init__(self, model: StateSpaceModel):
         self._model = model
-        self._dt: float | None = None
+        self._time_varying = not time_invariant(type(model).process_noise)
+        self._key: tuple[float, float] | None = None
         self._q = self._q_sqrt = None
         self._mask_key: bytes | None = None
         self._r = self._r_sqrt = None
 
-    def process(self, dt: float) -> np.ndarray:
-        """``Q(dt)`` ``(n, n)``."""
-        if dt != self._dt:
-            self._q, self._q_sqrt, self._dt = self._model.process_noise(dt), None, dt
+    def process(self, dt: float, t: float) -> np.ndarray:
+        """``Q`` ``(n, n)`` over ``[t, t + dt]``."""
+        key = (dt, t if self._time_varying else 0.0)
+        if key != self._key:
+            self._q, self._q_sqrt, self._key = self._model.process_noise(dt, t), None, key
         return self._q
 
-    def process_sqrt(self, dt: float) -> np.ndarray:
-        """``L`` ``(n, n)`` with ``L L^T = Q(dt)``."""
-        q = self.process(dt)
+    def process_sqrt(self, dt: float, t: float) -> np.ndarray:
+        """``L`` ``(n, n)`` with ``L L^T = Q`` over ``[t, t + dt]``."""
+        q = self.process(dt, t)
         if self._q_sqrt is None:
             self._q_sqrt = psd_sqrt(q)
         return self._q_sqrt
@@ -108,8 +111,8 @@ class _GaussianFilter(Filter):
         self._noise = ModelNoise(model)
         self.last_log_likelihood = 0.0
 
-    def initialize(self, mean: np.ndarray, cov: np.ndarray) -> None:
-        self._x, self._P = self._check_prior(mean, cov)
+    def initialize(self, mean: np.ndarray, cov: np.ndarray, t0: float = 0.0) -> None:
+        self._x, self._P = self._check_prior(mean, cov, t0)
         self.last_log_likelihood = 0.0
         self._remember(self._x, self._P)
         self.initialized = True
@@ -144,10 +147,10 @@ class ExtendedKF(_GaussianFilter):
         x = self._x[None]
         F = self.model.transition_jacobian(x, dt, self.time, u)[0]
         self._x = self.model.transition(x, dt, self.time, u)[0]
-        P = F @ self._P @ F.T + self._noise.process(dt)
+        P = F @ self._P @ F.T + self._noise.process(dt, self.time)
         self._P = 0.5 * (P + P.T)
         self.time += dt
-        self._guard()
+        self._guard(updated=False)
 
     def update(self, y: np.ndarray) -> None:
         """Condition on ``y`` ``(m,)``; NaN rows are not measured, an all-NaN ``y`` is a no-op."""
@@ -157,7 +160,7 @@ class ExtendedKF(_GaussianFilter):
         y, mask = measured
         k = np.count_nonzero(mask)
         x = self._x[None]
-        hx, H = self.model.measure_and_jacobian(x)
+        hx, H = self.model.measure_and_jacobian(x, self.time)
         r, H = self.model.residual(y, hx[0]), H[0]
         if k < mask.shape[0]:
             r, H = r[mask], H[mask]
@@ -175,7 +178,7 @@ class ExtendedKF(_GaussianFilter):
         A = self._eye - K @ H
         P = A @ P @ A.T + K @ R @ Kt
         self._P = 0.5 * (P + P.T)
-        self._guard()
+        self._guard(updated=True)
 
 
 class UnscentedKF(_GaussianFilter):
@@ -248,10 +251,10 @@ class UnscentedKF(_GaussianFilter):
         Y = self.model.transition(self._x + self._sigma_offsets(), dt, self.time, u)
         D = Y - Y[0]
         delta = self._w * D.sum(axis=0)
-        P = self._spread(D, delta) + self._noise.process(dt)
+        P = self._spread(D, delta) + self._noise.process(dt, self.time)
         self._x, self._P = Y[0] + delta, 0.5 * (P + P.T)
         self.time += dt
-        self._guard()
+        self._guard(updated=False)
 
     def update(self, y: np.ndarray) -> None:
         """Condition on ``y`` ``(m,)``; NaN rows are not measured, an all-NaN ``y`` is a no-op."""
@@ -262,7 +265,7 @@ class UnscentedKF(_GaussianFilter):
         k = np.count_nonzero(mask)
         model = self.model
         E = self._sigma_offsets()
-        Z = model.measure(self._x + E)
+        Z = model.measure(self._x + E, self.time)
         dZ = model.residual(Z, Z[0])
         delta = model.measurement_mean(dZ, self._wm)
         mu = self._w * dZ.sum(axis=0)
@@ -280,4 +283,4 @@ class UnscentedKF(_GaussianFilter):
         self._x = self._x + s_r @ C
         P = self._P - C.T @ Kt
         self._P = 0.5 * (P + P.T)
-        self._guard()
+        self._guard(updated=True)

@@ -21,7 +21,7 @@ from gpf_nav import resampling as resamplers
 from gpf_nav.filters.base import Filter
 from gpf_nav.filters.projection import project
 from gpf_nav.linalg import cholesky_or_none, psd_sqrt
-from gpf_nav.models.base import StateSpaceModel
+from gpf_nav.models.base import StateSpaceModel, time_invariant
 
 
 STATE_LIMIT = 1e150
@@ -65,9 +65,12 @@ class ParticleFilter(Filter):
         self._logw = np.full(self.n_particles, -np.log(self.n_particles))
         self._weights = np.full(self.n_particles, 1.0 / self.n_particles)
         self._pending_dt = 0.0
+        self._pending_t = 0.0
         self._R = np.asarray(model.measurement_noise(), dtype=float)
         self._whiteners: dict[bytes, tuple[np.ndarray, float]] = {}
-        self._noise_cache: tuple[float, np.ndarray | None, np.ndarray | None] = (-1.0, None, None)
+        self._time_varying_noise = not time_invariant(type(model).process_noise)
+        self._noise_cache: tuple[tuple[float, float] | None, np.ndarray | None, np.ndarray | None] = \
+            (None, None, None)
         self.ess = 1.0
         self.resampled = False
         self.resample_count = 0
@@ -76,8 +79,8 @@ class ParticleFilter(Filter):
         self._costate_rows = np.zeros(model.measurement_dim, bool)
 
     # --- state ---------------------------------------------------------------------------------------
-    def initialize(self, mean, cov):
-        mean, cov = self._check_prior(mean, cov)
+    def initialize(self, mean, cov, t0=0.0):
+        mean, cov = self._check_prior(mean, cov, t0)
         z = self.rng.standard_normal((mean.size, self.n_particles))
         self._x = np.ascontiguousarray(mean[:, None] + psd_sqrt(cov) @ z)
         self._set_uniform_weights()
@@ -107,7 +110,7 @@ class ParticleFilter(Filter):
         d = self._x - (self._x @ self._weights)[:, None]
         cov = (d * self._weights) @ d.T
         if self._pending_dt > 0.0:
-            cov = cov + self.model.process_noise(self._pending_dt)
+            cov = cov + self.model.process_noise(self._pending_dt, self._pending_t)
         return 0.5 * (cov + cov.T)
 
     @property
@@ -150,6 +153,8 @@ class ParticleFilter(Filter):
         if dt == 0.0:
             return
         self._x = np.ascontiguousarray(self.model.transition(self._x.T, dt, self.time, u).T)
+        if self._pending_dt == 0.0:
+            self._pending_t = self.time
         self._pending_dt += dt
         self.time += dt
         self._discard_non_finite()
@@ -213,16 +218,19 @@ class ParticleFilter(Filter):
             self._recover(f"ESS below 1.5 particles for {self.collapse_steps} updates")
 
     def _noise_factors(self, dt: float) -> tuple[np.ndarray, np.ndarray | None]:
-        """``(L, L^-1)`` with ``L L^T = Q(dt)``; ``L^-1`` is None when ``Q`` is not positive definite.
+        """``(L, L^-1)`` with ``L L^T = Q`` over the pending interval ``[t, t + dt]`` (``t`` its start);
+        ``L^-1`` is None when ``Q`` is not positive definite.
 
-        Cached for the last ``dt`` (measurements usually arrive at a fixed rate)."""
-        if self._noise_cache[0] != dt:
-            q = self.model.process_noise(dt)
+        Cached for the last ``dt`` (measurements usually arrive at a fixed rate), and the last ``t`` when
+        the model's ``process_noise`` takes ``t``."""
+        key = (dt, self._pending_t if self._time_varying_noise else 0.0)
+        if self._noise_cache[0] != key:
+            q = self.model.process_noise(dt, self._pending_t)
             chol = cholesky_or_none(q)
             if chol is None:
-                self._noise_cache = (dt, psd_sqrt(q), None)
+                self._noise_cache = (key, psd_sqrt(q), None)
             else:
-                self._noise_cache = (dt, chol, np.linalg.inv(chol))
+                self._noise_cache = (key, chol, np.linalg.inv(chol))
         return self._noise_cache[1], self._noise_cache[2]
 
     def _sample(self, x_pred: np.ndarray, y: np.ndarray, rows: np.ndarray, dt: float
@@ -281,7 +289,7 @@ class ParticleFilter(Filter):
     def _innovation(self, states: np.ndarray, y: np.ndarray, rows: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray]:
         """Jacobian ``(N, k, n)`` and innovation ``y - h(x)`` ``(N, k)`` of the measured rows."""
-        h, H = self.model.measure_and_jacobian(states)
+        h, H = self.model.measure_and_jacobian(states, self.time)
         return select_rows(H, rows), select_columns(self.model.residual(y, h), rows)
 
     # --- weighting -----------------------------------------------------------------------------------
@@ -304,7 +312,7 @@ class ParticleFilter(Filter):
 
     def _log_likelihood(self, x: np.ndarray, y: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """Gaussian ``log p(y_rows | x)`` ``(N,)`` for particles ``x`` ``(n, N)``."""
-        e = self.model.residual(y, self.model.measure(x.T)).T  # (m, N)
+        e = self.model.residual(y, self.model.measure(x.T, self.time)).T  # (m, N)
         w, constant = self._whitening(rows)
         e = e if rows.all() else e[rows]
         ew = e * w[:, None] if w.ndim == 1 else w @ e  # (k, N)
