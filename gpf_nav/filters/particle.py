@@ -8,10 +8,14 @@ resampling) is written once, in :class:`ParticleFilter`.
 Particles are stored as ``(n, N)`` so numpy works on long contiguous rows; models see the transposed
 ``(N, n)`` view, whose columns are then contiguous.
 
-The process noise of an interval is drawn at the next ``update`` (``predict`` only accumulates the
-deterministic flow and the elapsed time). This keeps the proposal a proper Gaussian density
+The process noise of the last predicted interval is drawn at the next ``update`` (``predict`` moves
+the particles along the deterministic flow). This keeps the proposal a proper Gaussian density
 ``q(x_k | x_{k-1}, y_k) = N(flow(x_{k-1}) + shift, Q(dt))`` even when the node publishes predictions
-between measurements; between an update and the next one, :attr:`covariance` includes ``Q(dt)``.
+between measurements. A ``predict`` that finds the noise of an earlier interval still pending draws it
+first, so predict(dt1), predict(dt2), update(y) samples the same process as predict(dt1),
+update(NaN), predict(dt2), update(y): ``x2 = flow2(flow1(x0) + w1) + w2``, not
+``flow2(flow1(x0)) + w``, which differ for a nonlinear model. Until the next update, :attr:`covariance`
+includes the pending ``Q``.
 """
 from __future__ import annotations
 
@@ -152,10 +156,12 @@ class ParticleFilter(Filter):
         dt = self._check_dt(dt)
         if dt == 0.0:
             return
+        if self._pending_dt > 0.0:
+            factor = self._noise_factors(self._pending_dt)[0]
+            # a new array, so views handed out as `particles` keep their state
+            self._x = self._x + factor @ self.rng.standard_normal(self._x.shape)
         self._x = np.ascontiguousarray(self.model.transition(self._x.T, dt, self.time, u).T)
-        if self._pending_dt == 0.0:
-            self._pending_t = self.time
-        self._pending_dt += dt
+        self._pending_dt, self._pending_t = dt, self.time
         self.time += dt
         self._discard_non_finite()
 
