@@ -21,6 +21,7 @@ are large for every filter; "lost" flags a final error beyond the prior's own po
 from __future__ import annotations
 
 import argparse
+import functools
 import time
 
 import numpy as np
@@ -55,21 +56,22 @@ class BearingsOnlyModel(StateSpaceModel):
         self.accel_std = float(accel_std)
         self._R = np.array([[bearing_std ** 2]])
 
-    def drift(self, x, t=0.0, u=None):
-        out = np.zeros_like(x)
-        out[:, 0], out[:, 2] = x[:, 1], x[:, 3]
-        return out
-
-    def transition(self, x, dt, t=0.0, u=None):
-        out = np.array(x, dtype=float)
-        out[:, 0] += dt * x[:, 1]
-        out[:, 2] += dt * x[:, 3]
-        return out
-
-    def transition_jacobian(self, x, dt, t=0.0, u=None):
+    @staticmethod
+    @functools.lru_cache(maxsize=8)
+    def _transition_matrix(dt: float) -> np.ndarray:
         F = np.eye(4)
         F[0, 1] = F[2, 3] = dt
-        return np.broadcast_to(F, (x.shape[0], 4, 4))
+        F.flags.writeable = False
+        return F
+
+    def drift(self, x, t=0.0, u=None):
+        return x @ self._transition_matrix(1.0).T - x  # (F(1) - I) x: the velocities in the positions
+
+    def transition(self, x, dt, t=0.0, u=None):
+        return x @ self._transition_matrix(dt).T
+
+    def transition_jacobian(self, x, dt, t=0.0, u=None):
+        return np.repeat(self._transition_matrix(dt)[None], x.shape[0], axis=0)
 
     def process_noise(self, dt):
         block = self.accel_std ** 2 * np.array([[dt ** 3 / 3.0, dt ** 2 / 2.0], [dt ** 2 / 2.0, dt]])
@@ -78,13 +80,15 @@ class BearingsOnlyModel(StateSpaceModel):
         return Q
 
     def measure(self, x):
-        return np.arctan2(x[:, 2], x[:, 0])[:, None]
+        return np.arctan2(x[:, 2:3], x[:, 0:1])
 
     def measurement_jacobian(self, x):
-        r2 = x[:, 0] ** 2 + x[:, 2] ** 2
+        px, py = x[:, 0], x[:, 2]
+        r2 = px * px + py * py
         H = np.zeros((x.shape[0], 1, 4))
-        H[:, 0, 0] = -x[:, 2] / r2
-        H[:, 0, 2] = x[:, 0] / r2
+        np.divide(py, r2, out=H[:, 0, 0])
+        np.negative(H[:, 0, 0], out=H[:, 0, 0])
+        np.divide(px, r2, out=H[:, 0, 2])
         return H
 
     def measurement_noise(self):

@@ -8,6 +8,7 @@ the ``dt`` predicted over); it is the ``t`` the filter passes to the model.
 """
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 
 import numpy as np
@@ -81,12 +82,15 @@ class Filter(ABC):
             self._last_good = (np.array(mean, dtype=float), np.array(cov, dtype=float))
             self._recovering = False
 
-    def _guard(self, updated: bool) -> None:
-        """After a step of a Gaussian or ensemble filter (``updated``: an update, else a prediction):
-        remember a healthy estimate, or recover from one that is non-finite or has a negative variance."""
-        mean, cov = self.mean, self.covariance
-        # a sum is finite only if every term is (an overflowing sum counts as unhealthy too)
-        if np.isfinite(mean.sum() + cov.sum()) and cov.diagonal().min() >= 0.0:
+    def _guard(self, updated: bool, mean: np.ndarray, cov: np.ndarray) -> None:
+        """After a step of a Gaussian or ensemble filter (``updated``: an update, else a prediction) that
+        left the estimate ``mean (n,)``, ``cov (n, n)``: remember it when healthy, or recover from an
+        estimate that is non-finite or has a negative variance. It runs at every step: for the small
+        ``n`` of these filters, sums of Python lists cost less than numpy reductions."""
+        diagonal = cov.diagonal().tolist()
+        # a sum is finite only if every term is (an overflowing sum counts as unhealthy too); a NaN on
+        # the diagonal fails the min or the sum
+        if min(diagonal) >= 0.0 and math.isfinite(sum(mean.tolist()) + sum(cov.ravel().tolist())):
             if updated or not self._recovering:
                 self._last_good = (mean, cov)  # the filters never write their state in place
                 self._recovering = False
@@ -136,19 +140,20 @@ class Filter(ABC):
             raise ValueError(f"measurement must have shape ({self.model.measurement_dim},), got {y.shape}")
         return y, np.isfinite(y)
 
-    def _measured_rows(self, y) -> tuple[np.ndarray, np.ndarray] | None:
-        """Start a Gaussian-type update: ``(y, mask)``, or None (and a zero ``last_log_likelihood``)
-        when nothing is measured."""
+    def _measured_rows(self, y) -> tuple[np.ndarray, np.ndarray, int] | None:
+        """Start a Gaussian-type update: ``(y, mask, number of measured rows)``, or None (and a zero
+        ``last_log_likelihood``) when nothing is measured."""
         self._require_initialized()
         y, mask = self._check_measurement(y)
-        if not mask.any():
+        k = np.count_nonzero(mask)
+        if not k:
             self.last_log_likelihood = 0.0
             return None
-        return y, mask
+        return y, mask, k
 
     @staticmethod
     def _check_dt(dt) -> float:
         dt = float(dt)
-        if not np.isfinite(dt) or dt < 0:
+        if not math.isfinite(dt) or dt < 0:
             raise ValueError(f"dt must be finite and non-negative, got {dt}")
         return dt

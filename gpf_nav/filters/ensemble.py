@@ -57,15 +57,14 @@ class EnsembleKF(Filter):
         X = self.model.transition(self._X, dt, self.time, u)
         self._X = X + self.rng.standard_normal(X.shape) @ self._noise.process_sqrt(dt, self.time).T
         self.time += dt
-        self._guard(updated=False)
+        self._guard(False, self.mean, self.covariance)
 
     def update(self, y: np.ndarray) -> None:
         """Condition on ``y`` ``(m,)``; NaN rows are not measured, an all-NaN ``y`` is a no-op."""
         measured = self._measured_rows(y)
         if measured is None:
             return
-        y, mask = measured
-        k = np.count_nonzero(mask)
+        y, mask, k = measured
         model, X = self.model, self._X
         HX = model.measure(X, self.time)
         h_mean = model.measurement_mean(HX, self._weights)
@@ -87,7 +86,7 @@ class EnsembleKF(Filter):
             return
         innovations += self.rng.standard_normal(innovations.shape) @ self._noise.measurement_sqrt(mask).T
         self._X = X + innovations @ Kt
-        self._guard(updated=True)
+        self._guard(True, self.mean, self.covariance)
 
     @property
     def particles(self) -> np.ndarray:

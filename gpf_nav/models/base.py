@@ -32,10 +32,12 @@ def wrap_angle(a: np.ndarray) -> np.ndarray:
     return a - _TWO_PI * np.ceil((a - np.pi) * (1.0 / _TWO_PI))
 
 
-def _angle_columns(angular: np.ndarray) -> slice | np.ndarray | None:
-    """The angular components as a slice when they are consecutive (one wrap, no gather), else their
-    indices; None when there are none."""
-    index = np.flatnonzero(angular)
+@functools.lru_cache(maxsize=16)
+def _angle_columns(angular: bytes) -> slice | np.ndarray | None:
+    """The angular components of the mask ``angular`` (its bytes: cached, the residual runs at every
+    step) as a slice when they are consecutive (one wrap, no gather), else their indices; None when
+    there are none."""
+    index = np.flatnonzero(np.frombuffer(angular, dtype=bool))
     if index.size == 0:
         return None
     if index[-1] - index[0] + 1 == index.size:
@@ -141,9 +143,12 @@ class StateSpaceModel(ABC):
         Shapes broadcast: ``(m,)`` against ``(N, m)`` gives ``(N, m)``.
         """
         r = np.asarray(y, dtype=float) - y_pred
-        angles = _angle_columns(self.angular)
+        angles = _angle_columns(np.asarray(self.angular, dtype=bool).tobytes())
         if angles is not None:
-            r[..., angles] = wrap_angle(r[..., angles])
+            # wrap_angle, skipping its subtraction when no component needs it (the usual case)
+            turns = np.ceil((r[..., angles] - np.pi) * (1.0 / _TWO_PI))
+            if np.count_nonzero(turns):
+                r[..., angles] -= _TWO_PI * turns
         return r
 
     def measurement_mean(self, y: np.ndarray, weights: np.ndarray) -> np.ndarray:
