@@ -75,7 +75,7 @@ class EnsembleKF(Filter):
         innovations = model.residual(y, HX)  # (N, m)
         if k < mask.shape[0]:
             Ay, innovations, r = Ay[:, mask], innovations[:, mask], r[mask]
-        Ax = X - self._weights @ X
+        Ax = X - np.einsum("n,ni->i", self._weights, X)
         scale = 1.0 / (self.n_particles - 1)
         Pyy = (Ay.T @ Ay) * scale + self._noise.measurement(mask)
         Pxy_t = (Ay.T @ Ax) * scale  # (k, n)
@@ -96,11 +96,11 @@ class EnsembleKF(Filter):
     @property
     def mean(self) -> np.ndarray:
         """Ensemble mean ``(n,)``."""
-        return readonly_view(self._weights @ self._X)
+        return readonly_view(np.einsum("n,ni->i", self._weights, self._X))
 
     @property
     def covariance(self) -> np.ndarray:
         """Unbiased ensemble covariance ``(n, n)``."""
-        A = self._X - self._weights @ self._X
+        A = self._X - np.einsum("n,ni->i", self._weights, self._X)
         P = (A.T @ A) / (self.n_particles - 1)
         return readonly_view(0.5 * (P + P.T))

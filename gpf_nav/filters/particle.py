@@ -6,7 +6,8 @@ The loop (deterministic drift in ``predict``, proposal + noise + weighting in ``
 resampling) is written once, in :class:`ParticleFilter`.
 
 Particles are stored as ``(n, N)`` so numpy works on long contiguous rows; models see the transposed
-``(N, n)`` view, whose columns are then contiguous.
+``(N, n)`` view, whose columns are then contiguous. Weighted sums over the particles are ``np.einsum``,
+never a BLAS vector product, which a threaded BLAS can stall on a busy machine (:mod:`gpf_nav.blas`).
 
 The process noise of the last predicted interval is drawn at the next ``update`` (``predict`` moves
 the particles along the deterministic flow). This keeps the proposal a proper Gaussian density
@@ -107,7 +108,7 @@ class ParticleFilter(Filter):
 
     @property
     def mean(self):
-        return self._x @ self._weights
+        return np.einsum("in,n->i", self._x, self._weights)  # not BLAS: see gpf_nav.blas
 
     @property
     def covariance(self):
@@ -138,12 +139,13 @@ class ParticleFilter(Filter):
     @property
     def costate_mean(self) -> np.ndarray:
         """Weighted mean co-state ``(m,)``."""
-        return self._weights @ self._costate
+        return np.einsum("n,nk->k", self._weights, self._costate)
 
     @property
     def costate_norm_mean(self) -> float:
         """Weighted mean of the per-particle co-state norms."""
-        return float(self._weights @ np.sqrt(np.einsum("ij,ij->i", self._costate, self._costate)))
+        norms = np.sqrt(np.einsum("ij,ij->i", self._costate, self._costate))
+        return float(np.einsum("n,n->", self._weights, norms))
 
     @property
     def costate_norm_max(self) -> float:

@@ -153,8 +153,9 @@ class StateSpaceModel(ABC):
 
     def measurement_mean(self, y: np.ndarray, weights: np.ndarray) -> np.ndarray:
         """Weighted mean of measurements ``(K, m)`` with weights ``(K,)``; angles by circular mean."""
-        mean = weights @ y
+        mean = np.einsum("k,km->m", weights, y)  # not BLAS: K may be an ensemble size
         if np.any(self.angular):
             a = y[:, self.angular]
-            mean[self.angular] = np.arctan2(weights @ np.sin(a), weights @ np.cos(a))
+            mean[self.angular] = np.arctan2(np.einsum("k,km->m", weights, np.sin(a)),
+                                            np.einsum("k,km->m", weights, np.cos(a)))
         return mean
