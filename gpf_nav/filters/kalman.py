@@ -12,7 +12,7 @@ from scipy.linalg.lapack import dposv, dpotrf
 
 from gpf_nav.filters.base import Filter
 from gpf_nav.linalg import psd_sqrt
-from gpf_nav.models.base import StateSpaceModel, time_invariant
+from gpf_nav.models.base import StateSpaceModel
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -57,7 +57,7 @@ class ModelNoise:
 
     def __init__(self, model: StateSpaceModel):
         self._model = model
-        self._time_varying = not time_invariant(type(model).process_noise)
+        self._time_varying = model.time_varying_noise
         self._key: tuple[float, float] | None = None
         self._q = self._q_sqrt = None
         self._mask_key: bytes | None = None

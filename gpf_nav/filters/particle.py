@@ -26,7 +26,7 @@ from gpf_nav import resampling as resamplers
 from gpf_nav.filters.base import Filter
 from gpf_nav.filters.projection import project
 from gpf_nav.linalg import cholesky_or_none, psd_sqrt
-from gpf_nav.models.base import StateSpaceModel, time_invariant
+from gpf_nav.models.base import StateSpaceModel
 
 
 STATE_LIMIT = 1e150
@@ -73,7 +73,7 @@ class ParticleFilter(Filter):
         self._pending_t = 0.0
         self._R = np.asarray(model.measurement_noise(), dtype=float)
         self._whiteners: dict[bytes, tuple[np.ndarray, float]] = {}
-        self._time_varying_noise = not time_invariant(type(model).process_noise)
+        self._time_varying_noise = model.time_varying_noise
         self._noise_cache: tuple[tuple[float, float] | None, np.ndarray | None, np.ndarray | None] = \
             (None, None, None)
         self.ess = 1.0

@@ -129,6 +129,12 @@ class StateSpaceModel(ABC):
     def measurement_jacobian(self, x: np.ndarray, t: float = 0.0) -> np.ndarray:
         """Measurement Jacobian ``H(x, t)``: ``(N, n) -> (N, m, n)``."""
 
+    @property
+    def time_varying_noise(self) -> bool:
+        """Whether ``process_noise`` depends on ``t`` (its signature takes ``t``): filters then cache
+        ``Q`` per ``(dt, t)`` instead of per ``dt``. A model that wraps another delegates this."""
+        return not time_invariant(type(self).process_noise)
+
     def measure_and_jacobian(self, x: np.ndarray, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """``(h(x, t) (N, m), H(x, t) (N, m, n))`` together; override to share work between the two."""
         return self.measure(x, t), self.measurement_jacobian(x, t)
