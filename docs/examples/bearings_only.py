@@ -112,9 +112,14 @@ def filters(n_particles: int, seed: int) -> dict[str, object]:
     model = BearingsOnlyModel()
     return {
         "BootstrapPF": BootstrapPF(model, n_particles, seed=seed),
-        "GPF (likelihood, Euclidean)": GeometricProjectionPF(model, n_particles, seed=seed),
+        "GPF (cloud metric)": GeometricProjectionPF(model, n_particles, unmodelled_acceleration_std=0.0,
+                                                    seed=seed),
+        "GPF (paper: likelihood, Euclidean)": GeometricProjectionPF(
+            model, n_particles, weighting="likelihood", metric="euclidean", unmodelled_acceleration_std=0.0,
+            seed=seed),
         "GPF (corrected, process_noise)": GeometricProjectionPF(
-            model, n_particles, weighting="corrected", metric="process_noise", regularization=1.0, seed=seed),
+            model, n_particles, weighting="corrected", metric="process_noise", regularization=1.0,
+            unmodelled_acceleration_std=0.0, seed=seed),
         "EKF": ExtendedKF(model),
         "UKF": UnscentedKF(model),
         "EnKF": EnsembleKF(model, n_particles, seed=seed),
