@@ -136,8 +136,9 @@ def test_t_is_the_elapsed_time_since_initialize_at_t0(filter_name):
     f.update(np.array([1.0]))
     assert f.time == 8.0
     seen = set(model.seen)
-    assert {("transition", 5.0), ("transition", 6.0), ("measure", 6.0), ("measure", 8.0)} <= seen
-    assert {("process_noise", 5.0), ("process_noise", 6.0)} <= seen  # the start of each interval
+    # times other than t0 (the validation already called every method at t0, and Q may be cached)
+    assert {("transition", 6.0), ("measure", 6.0), ("measure", 8.0)} <= seen
+    assert ("process_noise", 6.0) in seen  # the start of the interval
     f.initialize(*PRIOR)
     assert f.time == 0.0
 
