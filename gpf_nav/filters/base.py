@@ -17,6 +17,11 @@ from gpf_nav.models.base import StateSpaceModel
 from gpf_nav.models.validation import validate_model
 
 
+COVARIANCE_LIMIT = 1e300
+"""A covariance whose trace reaches this counts as unhealthy: inflated by a recovery, or estimated from
+an ensemble (a sum of N such products), it would overflow."""
+
+
 class Filter(ABC):
     """Base class of all filters: holds the model, the filter time and a seeded random generator.
 
@@ -85,17 +90,18 @@ class Filter(ABC):
     def _guard(self, updated: bool, mean: np.ndarray, cov: np.ndarray) -> None:
         """After a step of a Gaussian or ensemble filter (``updated``: an update, else a prediction) that
         left the estimate ``mean (n,)``, ``cov (n, n)``: remember it when healthy, or recover from an
-        estimate that is non-finite or has a negative variance. It runs at every step: for the small
+        estimate that is non-finite, has a negative variance or a trace beyond ``COVARIANCE_LIMIT``. It runs at every step: for the small
         ``n`` of these filters, sums of Python lists cost less than numpy reductions."""
         diagonal = cov.diagonal().tolist()
         # a sum is finite only if every term is (an overflowing sum counts as unhealthy too); a NaN on
-        # the diagonal fails the min or the sum
-        if min(diagonal) >= 0.0 and math.isfinite(sum(mean.tolist()) + sum(cov.ravel().tolist())):
+        # the diagonal fails the comparisons
+        if (min(diagonal) >= 0.0 and sum(diagonal) < COVARIANCE_LIMIT
+                and math.isfinite(sum(mean.tolist()) + sum(cov.ravel().tolist()))):
             if updated or not self._recovering:
                 self._last_good = (mean, cov)  # the filters never write their state in place
                 self._recovering = False
         else:
-            self._recover("estimate became non-finite or its covariance indefinite")
+            self._recover("estimate became non-finite, or its covariance indefinite or near overflow")
 
     def _recover(self, reason: str) -> None:
         """Re-initialise from the last good estimate with its covariance times ``recovery_inflation``.
