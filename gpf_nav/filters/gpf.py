@@ -134,8 +134,8 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         self.gated = 0
         self._gate_streak = np.zeros(model.measurement_dim, dtype=int)
 
-    def initialize(self, mean, cov):
-        super().initialize(mean, cov)
+    def initialize(self, mean, cov, t0=0.0):
+        super().initialize(mean, cov, t0)
         self._previous_y = np.full(self.model.measurement_dim, np.nan)
 
     # --- the proposal ---------------------------------------------------------------------------------
@@ -155,14 +155,14 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
             return super()._sample(x_pred, y, rows, dt)
         centres, D = shrink(x_pred, self._weights, self.kernel_bandwidth)
         if dt > 0.0:
-            D = D + self.model.process_noise(dt)
+            D = D + self.model.process_noise(dt, self._pending_t)
         C = cholesky_or_none(D)
         if C is None:  # a collapsed cloud on a noise-free model: nothing to project with
             self._set_costate(None, rows, dt)
             return super()._sample(x_pred, y, rows, dt)
         n, eps = self.model.state_dim, self.regularization
-        H = self.model.measurement_jacobian((centres @ self._weights)[None])[0]  # (m, n)
-        r = self.model.residual(y, self.model.measure(centres.T))  # (N, m)
+        H = self.model.measurement_jacobian((centres @ self._weights)[None], self.time)[0]  # (m, n)
+        r = self.model.residual(y, self.model.measure(centres.T, self.time))  # (N, m)
         G, wr, S = self._whitened(H, r, rows, C)
         a_r = np.linalg.solve(S, wr)  # the co-state of every measured row, outliers included
         costate = (a_r.T, rows, dt if dt > 0.0 else 1.0)
@@ -268,7 +268,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         if self.reference == "innovation":
             H, r = self._innovation(states, y, rows)
         else:
-            H = select_rows(self.model.measurement_jacobian(states), rows)
+            H = select_rows(self.model.measurement_jacobian(states, self.time), rows)
             eta = np.einsum("nkj,nj->nk", H, self.model.drift(states, self.time, self._input))
             r = self.model.residual(y, self._previous_y)[rows] - eta * dt
         metric_factor = self._noise_factors(dt)[0] if self.metric == "process_noise" else None

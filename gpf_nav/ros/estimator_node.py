@@ -26,6 +26,7 @@ from std_srvs.srv import Trigger
 from diagnostic_msgs.msg import DiagnosticArray
 
 from gpf_nav.allocator import retain_freed_memory
+from gpf_nav.blas import limit_blas_threads
 from gpf_nav.ros import conversions as conv
 from gpf_nav.ros import diagnostics as diag
 from gpf_nav.ros import shutdown
@@ -450,6 +451,7 @@ def main(argv: list[str] | None = None) -> int:
     """Console script ``estimator``: returns 2 (after a FATAL log line) on invalid parameters, 0 when
     stopped by SIGINT or SIGTERM (:mod:`gpf_nav.ros.shutdown`)."""
     retain_freed_memory()
+    limit_blas_threads()
     stop = shutdown.init_without_signal_handlers(sys.argv if argv is None else argv)
     try:
         node = EstimatorNode()
