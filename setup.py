@@ -16,7 +16,7 @@ setup(
         ("share/" + PACKAGE + "/launch", glob("launch/*.py")),
     ],
     python_requires=">=3.10",
-    install_requires=["setuptools", "numpy", "scipy"],
+    install_requires=["setuptools", "numpy", "scipy", "threadpoolctl"],
     extras_require={
         # ROS 2 Jazzy Python client from PyPI, for machines without a system ROS installation; rosbags
         # (pure Python rosbag2 reader/writer) for gpf-nav record / replay.

@@ -9,9 +9,9 @@
     gpf-nav replay       the estimator run offline over a rosbag2 bag, with a summary (``gpf_nav.ros.replay``)
 
 Sub-command modules are imported lazily, so e.g. ``bench`` needs neither ROS nor matplotlib. Every
-sub-command runs with the heap tuning of :mod:`gpf_nav.allocator`. Bad arguments, to ``gpf-nav`` or
-to any sub-command, end with one line on stderr naming the problem and exit status 2
-(:class:`CommandParser`).
+sub-command runs with the heap tuning of :mod:`gpf_nav.allocator` and BLAS bounded to one thread
+(:mod:`gpf_nav.blas`). Bad arguments, to ``gpf-nav`` or to any sub-command, end with one line on stderr
+naming the problem and exit status 2 (:class:`CommandParser`).
 """
 from __future__ import annotations
 
@@ -20,6 +20,7 @@ import importlib
 import sys
 
 from gpf_nav.allocator import retain_freed_memory
+from gpf_nav.blas import limit_blas_threads
 
 COMMANDS = {
     "bench": "gpf_nav.experiments.bench",
@@ -75,6 +76,7 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return USAGE_ERROR
     retain_freed_memory()
+    limit_blas_threads()
     module = importlib.import_module(COMMANDS[argv[0]])
     return int(module.main(argv[1:]) or 0)
 

@@ -77,4 +77,4 @@ def get(name: str) -> Resampler:
 
 def effective_sample_size(weights: np.ndarray) -> float:
     """ESS ``1 / sum(w^2)`` of normalised weights ``(N,)``."""
-    return float(1.0 / np.dot(weights, weights))
+    return float(1.0 / np.einsum("i,i->", weights, weights))  # not a BLAS dot: see gpf_nav.blas

@@ -15,6 +15,10 @@ CASE_TITLES = {"full": "Case 1: full observability (range, azimuth, elevation)",
 _SHORT_CASE = {"full": "Case 1 (full obs.)", "partial": "Case 2 (partial obs.)"}
 
 _COLOURS = {
+    "GPF navigation (default)": "#000000",
+    "EKF + compensation": "#bcbd22",
+    "EKF, oracle-tuned Q": "#2ca02c",
+    "UKF, oracle-tuned Q": "#9467bd",
     "GPF (innovation, likelihood)": "#d62728",
     "GPF as printed (increment, likelihood)": "#ff7f0e",
     "GPF exact (innovation, corrected)": "#8c564b",
@@ -24,7 +28,8 @@ _COLOURS = {
     "UKF": "#9467bd",
     "EnKF": "#17becf",
 }
-_STYLES = {"UKF": "--", "GPF exact (innovation, corrected)": "--"}
+_STYLES = {"UKF": "--", "GPF exact (innovation, corrected)": "--", "EKF, oracle-tuned Q": ":",
+           "UKF, oracle-tuned Q": ":"}
 
 
 def _pyplot():
@@ -196,30 +201,34 @@ def _fmt_r(value) -> str:
     return "n/a" if value is None else f"{value:+.2f}"
 
 
-def sweep(values: np.ndarray, table: dict, param_label: str, runs: int, path: Path,
+def sweep(values: np.ndarray, tables: dict, param_label: str, runs: int, path: Path,
           reference_value: float | None = None) -> Path:
-    """Position RMSE (km, mean over runs with 1-sigma error bars) against a swept parameter.
+    """One row of panels per metric (mean over runs with 1-sigma error bars, log scale) against a swept
+    parameter, one column per case.
 
-    ``table[case][filter]`` is a list of ``{mean, std}`` (km), one per value.
+    ``tables[metric label][case][filter]`` is a list of ``{mean, std}``, one per value.
     """
     plt = _pyplot()
-    cases = list(table)
-    fig, axes = plt.subplots(1, len(cases), figsize=(7.0 * len(cases), 4.8), squeeze=False, layout="constrained")
-    for ax, case in zip(axes[0], cases):
-        for name, rows in table[case].items():
-            mean = np.array([np.nan if r["mean"] is None else r["mean"] for r in rows])
-            std = np.array([np.nan if r["std"] is None else r["std"] for r in rows])
-            ax.errorbar(values, mean, yerr=std, fmt="o" + style(name), color=colour(name), label=name,
-                        ms=4, lw=1.3, capsize=3)
-        if reference_value is not None:
-            ax.axvline(reference_value, color="k", ls=":", lw=0.8, label="Table 1 setting")
-        ax.set_yscale("log")
-        ax.set_xlabel(param_label)
-        ax.set_ylabel("position RMSE (km), mean +- std over runs")
-        ax.set_title(CASE_TITLES.get(case, case), fontsize=10)
-        ax.grid(True, which="both", alpha=0.3)
+    metrics = list(tables)
+    cases = list(tables[metrics[0]])
+    fig, axes = plt.subplots(len(metrics), len(cases), figsize=(7.0 * len(cases), 4.2 * len(metrics)),
+                             squeeze=False, layout="constrained")
+    for row, metric in enumerate(metrics):
+        for ax, case in zip(axes[row], cases):
+            for name, rows in tables[metric][case].items():
+                mean = np.array([np.nan if r["mean"] is None else r["mean"] for r in rows])
+                std = np.array([np.nan if r["std"] is None else r["std"] for r in rows])
+                ax.errorbar(values, mean, yerr=std, fmt="o" + style(name), color=colour(name), label=name,
+                            ms=4, lw=1.3, capsize=3)
+            if reference_value is not None:
+                ax.axvline(reference_value, color="k", ls=":", lw=0.8, label="Table 1 setting")
+            ax.set_yscale("log")
+            ax.set_xlabel(param_label)
+            ax.set_ylabel(f"{metric}, mean +- std")
+            ax.set_title(CASE_TITLES.get(case, case), fontsize=10)
+            ax.grid(True, which="both", alpha=0.3)
     _shared_legend(fig, axes[0][0])
-    fig.suptitle(f"Position RMSE against {param_label.split(' (')[0]}, {runs} Monte Carlo runs per point")
+    fig.suptitle(f"Against {param_label.split(' (')[0]}, {runs} Monte Carlo runs per point")
     return _save(fig, path)
 
 

@@ -113,6 +113,17 @@ def markdown(report: dict) -> str:
     return "\n".join(lines)
 
 
+def draw(report: dict, path: Path, reference_value: float | None = None) -> Path:
+    """The sweep figure (position, velocity, NEES against the swept value) of a report."""
+    from gpf_nav.experiments import plots
+
+    tables = {title.split(" (")[0] if key == "nees" else title:
+              {case: {name: rows[key] for name, rows in entry["filters"].items()}
+               for case, entry in report["cases"].items()} for key, title in TABLES.items()}
+    return plots.sweep(np.array(report["values"]), tables, report["label"], report["settings"]["runs"], path,
+                       reference_value=reference_value)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = CommandParser(prog="gpf-nav sweep", description=__doc__.split("\n\n")[0],
@@ -147,13 +158,7 @@ def main(argv: list[str] | None = None) -> int:
     md_path.write_text(markdown(report))
     written = [json_path, md_path]
     if not args.no_plots:
-        from gpf_nav.experiments import plots
-
-        table = {case: {name: rows["position_rmse_km"] for name, rows in entry["filters"].items()}
-                 for case, entry in report["cases"].items()}
-        reference = getattr(config, field)
-        written.append(plots.sweep(np.array(values), table, label, args.runs,
-                                   args.out / f"sweep_{args.param}.png", reference_value=reference))
+        written.append(draw(report, args.out / f"sweep_{args.param}.png", getattr(config, field)))
     print(markdown(report))
     print(f"wall time {wall:.1f} s; wrote " + ", ".join(str(p) for p in written))
     return 0

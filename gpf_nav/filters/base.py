@@ -2,22 +2,38 @@
 
 Measurements are vectors ``y`` of shape ``(m,)``; a non-finite component (NaN) means "not measured" and
 the update uses only the measured rows. That is how partial observability reaches a filter.
+
+Time: :attr:`Filter.time` is the elapsed time since ``initialize(mean, cov, t0)`` (``t0 + `` the sum of
+the ``dt`` predicted over); it is the ``t`` the filter passes to the model.
 """
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 
 import numpy as np
 
 from gpf_nav.models.base import StateSpaceModel
+from gpf_nav.models.validation import validate_model
+
+
+COVARIANCE_LIMIT = 1e300
+"""A covariance whose trace reaches this counts as unhealthy: inflated by a recovery, or estimated from
+an ensemble (a sum of N such products), it would overflow."""
 
 
 class Filter(ABC):
     """Base class of all filters: holds the model, the filter time and a seeded random generator.
 
+    The model is checked (:func:`~gpf_nav.models.validation.validate_model`) at the first ``initialize``.
+
     Args:
         model: the state-space model the filter runs on.
         seed: seed (or ``numpy.random.Generator``) of the filter's own random stream.
+
+    Attributes:
+        recoveries: how many times the filter re-initialised itself (see :meth:`_recover`).
+        last_recovery_reason: why it last did, or None.
     """
 
     def __init__(self, model: StateSpaceModel, seed: int | np.random.Generator | None = None):
@@ -29,10 +45,12 @@ class Filter(ABC):
         self.last_recovery_reason: str | None = None
         self.recovery_inflation = 10.0
         self._last_good: tuple[np.ndarray, np.ndarray] | None = None
+        self._recovering = False
+        self._model_checked = False
 
     @abstractmethod
-    def initialize(self, mean: np.ndarray, cov: np.ndarray) -> None:
-        """Start from the Gaussian prior ``N(mean (n,), cov (n, n))``."""
+    def initialize(self, mean: np.ndarray, cov: np.ndarray, t0: float = 0.0) -> None:
+        """Start from the Gaussian prior ``N(mean (n,), cov (n, n))`` at filter time ``t0``."""
 
     @abstractmethod
     def predict(self, dt: float, u: np.ndarray | None = None) -> None:
@@ -57,34 +75,52 @@ class Filter(ABC):
             raise RuntimeError(f"{type(self).__name__}: call initialize() before predict() or update()")
 
     # --- recovery ----------------------------------------------------------------------------------------
-    def _remember(self, mean: np.ndarray, cov: np.ndarray) -> None:
-        """Keep ``(mean, cov)`` as the last good estimate, if it is finite."""
-        if np.all(np.isfinite(mean)) and np.all(np.isfinite(cov)):
-            self._last_good = (np.array(mean, dtype=float), np.array(cov, dtype=float))
+    def _remember(self, mean: np.ndarray, cov: np.ndarray, updated: bool = True) -> None:
+        """Keep ``(mean, cov)`` as the last good estimate, if it is finite.
 
-    def _guard(self) -> None:
-        """After a step of a Gaussian or ensemble filter: remember a healthy estimate, or recover
-        from one that is non-finite or has a negative variance."""
-        mean, cov = self.mean, self.covariance
-        if np.all(np.isfinite(mean)) and np.all(np.isfinite(cov)) and np.all(np.diag(cov) >= 0.0):
-            self._last_good = (np.array(mean), np.array(cov))
+        After a recovery only an update (``updated``) may set it again: a prediction from the inflated
+        re-initialisation is not evidence of health, and remembering it would let consecutive
+        recoveries inflate an already inflated covariance."""
+        if self._recovering and not updated:
+            return
+        if np.isfinite(mean).all() and np.isfinite(cov).all():
+            self._last_good = (np.array(mean, dtype=float), np.array(cov, dtype=float))
+            self._recovering = False
+
+    def _guard(self, updated: bool, mean: np.ndarray, cov: np.ndarray) -> None:
+        """After a step of a Gaussian or ensemble filter (``updated``: an update, else a prediction) that
+        left the estimate ``mean (n,)``, ``cov (n, n)``: remember it when healthy, or recover from an
+        estimate that is non-finite, has a negative variance or a trace beyond ``COVARIANCE_LIMIT``. It runs at every step: for the small
+        ``n`` of these filters, sums of Python lists cost less than numpy reductions."""
+        diagonal = cov.diagonal().tolist()
+        # a sum is finite only if every term is (an overflowing sum counts as unhealthy too); a NaN on
+        # the diagonal fails the comparisons
+        if (min(diagonal) >= 0.0 and sum(diagonal) < COVARIANCE_LIMIT
+                and math.isfinite(sum(mean.tolist()) + sum(cov.ravel().tolist()))):
+            if updated or not self._recovering:
+                self._last_good = (mean, cov)  # the filters never write their state in place
+                self._recovering = False
         else:
-            self._recover("estimate became non-finite or its covariance indefinite")
+            self._recover("estimate became non-finite, or its covariance indefinite or near overflow")
 
     def _recover(self, reason: str) -> None:
         """Re-initialise from the last good estimate with its covariance times ``recovery_inflation``.
 
-        Counted in :attr:`recoveries`; :attr:`last_recovery_reason` says why. Filter time is kept.
+        Counted in :attr:`recoveries`; :attr:`last_recovery_reason` says why. Filter time is kept. The
+        inflation never compounds: until an update succeeds, the last good estimate stays the one
+        remembered before the first of consecutive recoveries.
         """
         self.recoveries += 1
         self.last_recovery_reason = reason
         mean, cov = self._last_good
-        time = self.time
-        self.initialize(mean, self.recovery_inflation * cov)
-        self.time = time
+        self.initialize(mean, self.recovery_inflation * cov, self.time)
+        self._last_good = (mean, cov)
+        self._recovering = True
 
     # --- helpers shared by the filters ---------------------------------------------------------------
-    def _check_prior(self, mean, cov) -> tuple[np.ndarray, np.ndarray]:
+    def _check_prior(self, mean, cov, t0: float) -> tuple[np.ndarray, np.ndarray]:
+        """Start ``initialize``: return the prior ``(mean (n,), cov (n, n))`` symmetrised, set the filter
+        time to ``t0`` and, the first time, validate the model on the prior (``ValueError`` if wrong)."""
         n = self.model.state_dim
         mean = np.asarray(mean, dtype=float).reshape(-1)
         cov = np.asarray(cov, dtype=float)
@@ -93,7 +129,15 @@ class Filter(ABC):
                              f"got {mean.shape} and {cov.shape}")
         if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
             raise ValueError("prior mean and covariance must be finite")
-        return mean, 0.5 * (cov + cov.T)
+        t0 = float(t0)
+        if not np.isfinite(t0):
+            raise ValueError(f"t0 must be finite, got {t0}")
+        cov = 0.5 * (cov + cov.T)
+        if not self._model_checked:
+            validate_model(self.model, mean, cov, t0)
+            self._model_checked = True
+        self.time = t0
+        return mean, cov
 
     def _check_measurement(self, y) -> tuple[np.ndarray, np.ndarray]:
         """Return ``(y (m,), measured rows (m,) bool)``; raise ValueError on a malformed shape."""
@@ -102,19 +146,20 @@ class Filter(ABC):
             raise ValueError(f"measurement must have shape ({self.model.measurement_dim},), got {y.shape}")
         return y, np.isfinite(y)
 
-    def _measured_rows(self, y) -> tuple[np.ndarray, np.ndarray] | None:
-        """Start a Gaussian-type update: ``(y, mask)``, or None (and a zero ``last_log_likelihood``)
-        when nothing is measured."""
+    def _measured_rows(self, y) -> tuple[np.ndarray, np.ndarray, int] | None:
+        """Start a Gaussian-type update: ``(y, mask, number of measured rows)``, or None (and a zero
+        ``last_log_likelihood``) when nothing is measured."""
         self._require_initialized()
         y, mask = self._check_measurement(y)
-        if not mask.any():
+        k = np.count_nonzero(mask)
+        if not k:
             self.last_log_likelihood = 0.0
             return None
-        return y, mask
+        return y, mask, k
 
     @staticmethod
     def _check_dt(dt) -> float:
         dt = float(dt)
-        if not np.isfinite(dt) or dt < 0:
+        if not math.isfinite(dt) or dt < 0:
             raise ValueError(f"dt must be finite and non-negative, got {dt}")
         return dt

@@ -13,6 +13,7 @@ import numpy as np
 from gpf_nav.filters.kalman import ExtendedKF
 from gpf_nav.models.base import StateSpaceModel
 from gpf_nav.models.compensation import ModelErrorCompensation
+from gpf_nav.models.validation import validate_model
 
 UNMODELLED_ACCELERATION_STD = 0.1
 """Default stationary standard deviation of the unmodelled acceleration (state units / s^2; m/s^2)."""
@@ -39,13 +40,16 @@ class ModelErrorCompensated:
         """True when the filter estimates an unmodelled acceleration."""
         return self.model is not self.nominal_model
 
-    def initialize(self, mean, cov):
-        """Start from the user's prior ``N(mean (n,), cov (n, n))``, the unmodelled acceleration from
-        ``N(0, sigma^2 I)``; an augmented prior ``(n + p,)`` is taken as it is."""
+    def initialize(self, mean, cov, t0=0.0):
+        """Start from the user's prior ``N(mean (n,), cov (n, n))`` at filter time ``t0``, the unmodelled
+        acceleration from ``N(0, sigma^2 I)``; an augmented prior ``(n + p,)`` is taken as it is. The
+        first time, the user's own model is validated on the user's prior, so errors name it."""
         mean = np.asarray(mean, dtype=float).reshape(-1)
         if self.compensated and mean.shape == (self.nominal_model.state_dim,):
+            if not self._model_checked:
+                validate_model(self.nominal_model, mean, np.asarray(cov, dtype=float), t0)
             mean, cov = self.model.augment_prior(mean, np.asarray(cov, dtype=float))
-        super().initialize(mean, cov)
+        super().initialize(mean, cov, t0)
 
     @property
     def mean(self) -> np.ndarray:

@@ -39,9 +39,9 @@ class EnsembleKF(Filter):
         self._noise = ModelNoise(model)
         self.last_log_likelihood = 0.0
 
-    def initialize(self, mean: np.ndarray, cov: np.ndarray) -> None:
+    def initialize(self, mean: np.ndarray, cov: np.ndarray, t0: float = 0.0) -> None:
         """Draw the ``N`` members from ``N(mean (n,), cov (n, n))``."""
-        mean, cov = self._check_prior(mean, cov)
+        mean, cov = self._check_prior(mean, cov, t0)
         z = self.rng.standard_normal(self._X.shape)
         self._X = mean + z @ psd_sqrt(cov).T
         self.last_log_likelihood = 0.0
@@ -55,19 +55,18 @@ class EnsembleKF(Filter):
         if dt == 0.0:
             return
         X = self.model.transition(self._X, dt, self.time, u)
-        self._X = X + self.rng.standard_normal(X.shape) @ self._noise.process_sqrt(dt).T
+        self._X = X + self.rng.standard_normal(X.shape) @ self._noise.process_sqrt(dt, self.time).T
         self.time += dt
-        self._guard()
+        self._guard(False, self.mean, self.covariance)
 
     def update(self, y: np.ndarray) -> None:
         """Condition on ``y`` ``(m,)``; NaN rows are not measured, an all-NaN ``y`` is a no-op."""
         measured = self._measured_rows(y)
         if measured is None:
             return
-        y, mask = measured
-        k = np.count_nonzero(mask)
+        y, mask, k = measured
         model, X = self.model, self._X
-        HX = model.measure(X)
+        HX = model.measure(X, self.time)
         h_mean = model.measurement_mean(HX, self._weights)
         # One residual call gives the anomalies Ay (N, m) of the predicted measurements and, in its last
         # row, the ensemble-mean innovation r (m,).
@@ -76,7 +75,7 @@ class EnsembleKF(Filter):
         innovations = model.residual(y, HX)  # (N, m)
         if k < mask.shape[0]:
             Ay, innovations, r = Ay[:, mask], innovations[:, mask], r[mask]
-        Ax = X - self._weights @ X
+        Ax = X - np.einsum("n,ni->i", self._weights, X)
         scale = 1.0 / (self.n_particles - 1)
         Pyy = (Ay.T @ Ay) * scale + self._noise.measurement(mask)
         Pxy_t = (Ay.T @ Ax) * scale  # (k, n)
@@ -87,7 +86,7 @@ class EnsembleKF(Filter):
             return
         innovations += self.rng.standard_normal(innovations.shape) @ self._noise.measurement_sqrt(mask).T
         self._X = X + innovations @ Kt
-        self._guard()
+        self._guard(True, self.mean, self.covariance)
 
     @property
     def particles(self) -> np.ndarray:
@@ -97,11 +96,11 @@ class EnsembleKF(Filter):
     @property
     def mean(self) -> np.ndarray:
         """Ensemble mean ``(n,)``."""
-        return readonly_view(self._weights @ self._X)
+        return readonly_view(np.einsum("n,ni->i", self._weights, self._X))
 
     @property
     def covariance(self) -> np.ndarray:
         """Unbiased ensemble covariance ``(n, n)``."""
-        A = self._X - self._weights @ self._X
+        A = self._X - np.einsum("n,ni->i", self._weights, self._X)
         P = (A.T @ A) / (self.n_particles - 1)
         return readonly_view(0.5 * (P + P.T))

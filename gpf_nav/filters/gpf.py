@@ -51,6 +51,8 @@ OUTLIER_GATE = 6.0
 """Default innovation gate of the cloud metric, standard deviations."""
 OUTLIER_GATE_LIMIT = 5
 """Default number of consecutive refusals of a component after which it is used anyway."""
+ILL_CONDITIONED = 1e12
+"""Cloud metric: ``trace(S) / eps`` beyond which the projection is skipped (the update only weights)."""
 DEFAULT_REGULARIZATION = {"cloud": 1.0, "euclidean": 1e-6, "process_noise": 1e-6}
 """Tikhonov ``eps`` of each metric when none is given (1: the measurement noise itself, for ``cloud``)."""
 
@@ -134,8 +136,8 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         self.gated = 0
         self._gate_streak = np.zeros(model.measurement_dim, dtype=int)
 
-    def initialize(self, mean, cov):
-        super().initialize(mean, cov)
+    def initialize(self, mean, cov, t0=0.0):
+        super().initialize(mean, cov, t0)
         self._previous_y = np.full(self.model.measurement_dim, np.nan)
 
     # --- the proposal ---------------------------------------------------------------------------------
@@ -155,15 +157,20 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
             return super()._sample(x_pred, y, rows, dt)
         centres, D = shrink(x_pred, self._weights, self.kernel_bandwidth)
         if dt > 0.0:
-            D = D + self.model.process_noise(dt)
-        C = cholesky_or_none(D)
-        if C is None:  # a collapsed cloud on a noise-free model: nothing to project with
+            D = D + self.model.process_noise(dt, self._pending_t)
+        C = cholesky_or_none(D) if np.all(np.isfinite(D)) else None
+        if C is None:  # a collapsed cloud on a noise-free model, or a runaway one: nothing to project with
             self._set_costate(None, rows, dt)
             return super()._sample(x_pred, y, rows, dt)
         n, eps = self.model.state_dim, self.regularization
-        H = self.model.measurement_jacobian((centres @ self._weights)[None])[0]  # (m, n)
-        r = self.model.residual(y, self.model.measure(centres.T))  # (N, m)
+        H = self.model.measurement_jacobian((centres @ self._weights)[None], self.time)[0]  # (m, n)
+        r = self.model.residual(y, self.model.measure(centres.T, self.time))  # (N, m)
         G, wr, S = self._whitened(H, r, rows, C)
+        # S >= eps I in exact arithmetic; when the prediction is beyond ~1e6 measurement sigmas, or a
+        # Jacobian overflowed, the identity is lost to rounding and there is nothing sound to project
+        if not (np.all(np.isfinite(S)) and np.trace(S) < ILL_CONDITIONED * eps):
+            self._set_costate(None, rows, dt)
+            return super()._sample(x_pred, y, rows, dt)
         a_r = np.linalg.solve(S, wr)  # the co-state of every measured row, outliers included
         costate = (a_r.T, rows, dt if dt > 0.0 else 1.0)
         used = self._gate(wr @ self._weights, S, rows)
@@ -259,6 +266,9 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         self._weighted_moments = None
 
     def _propose(self, x_pred, y, rows, dt, inverse_factor, z):
+        if self.metric == "cloud":  # a fallback of the cloud proposal: the prior transition this time
+            self._set_costate(None, rows, dt)
+            return None, 0.0
         if self.reference == "increment":
             rows = rows & np.isfinite(self._previous_y)
         if dt == 0.0 or not rows.any() or (self.weighting == "corrected" and inverse_factor is None):
@@ -268,7 +278,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         if self.reference == "innovation":
             H, r = self._innovation(states, y, rows)
         else:
-            H = select_rows(self.model.measurement_jacobian(states), rows)
+            H = select_rows(self.model.measurement_jacobian(states, self.time), rows)
             eta = np.einsum("nkj,nj->nk", H, self.model.drift(states, self.time, self._input))
             r = self.model.residual(y, self._previous_y)[rows] - eta * dt
         metric_factor = self._noise_factors(dt)[0] if self.metric == "process_noise" else None

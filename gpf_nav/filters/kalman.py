@@ -31,6 +31,12 @@ def innovation_solve(S: np.ndarray, B: np.ndarray, r: np.ndarray) -> tuple[np.nd
     Raises:
         numpy.linalg.LinAlgError: if ``S`` is not positive definite.
     """
+    if S.shape[0] == 1:  # one measured row: a division
+        s = float(S[0, 0])
+        if not s > 0.0:
+            raise np.linalg.LinAlgError(f"innovation variance is not positive ({s})")
+        s_r = r / s
+        return B / s, s_r, -0.5 * (float(r[0]) * float(s_r[0]) + math.log(s) + _LOG_2PI)
     # LAPACK dposv: Cholesky factor and solve in one call (numpy's cholesky + solve cost ~7x more here).
     L, sol, info = dposv(S, np.concatenate((B, r[:, None]), axis=1), lower=1, overwrite_b=1)
     if info != 0:
@@ -44,26 +50,29 @@ def innovation_solve(S: np.ndarray, B: np.ndarray, r: np.ndarray) -> tuple[np.nd
 class ModelNoise:
     """A model's ``Q(dt)`` and measured-rows block of ``R``, with square roots, computed once and cached.
 
-    The model's noise is taken as fixed after construction: ``Q`` is recomputed only when ``dt`` changes
-    and the ``R`` block only when the set of measured rows changes.
+    ``R`` is taken as fixed after construction: its block is recomputed only when the set of measured
+    rows changes. ``Q`` is recomputed when ``dt`` changes, and when ``t`` changes if the model's
+    ``process_noise`` takes ``t``.
     """
 
     def __init__(self, model: StateSpaceModel):
         self._model = model
-        self._dt: float | None = None
+        self._time_varying = model.time_varying_noise
+        self._key: tuple[float, float] | None = None
         self._q = self._q_sqrt = None
         self._mask_key: bytes | None = None
         self._r = self._r_sqrt = None
 
-    def process(self, dt: float) -> np.ndarray:
-        """``Q(dt)`` ``(n, n)``."""
-        if dt != self._dt:
-            self._q, self._q_sqrt, self._dt = self._model.process_noise(dt), None, dt
+    def process(self, dt: float, t: float) -> np.ndarray:
+        """``Q`` ``(n, n)`` over ``[t, t + dt]``."""
+        key = (dt, t if self._time_varying else 0.0)
+        if key != self._key:
+            self._q, self._q_sqrt, self._key = self._model.process_noise(dt, t), None, key
         return self._q
 
-    def process_sqrt(self, dt: float) -> np.ndarray:
-        """``L`` ``(n, n)`` with ``L L^T = Q(dt)``."""
-        q = self.process(dt)
+    def process_sqrt(self, dt: float, t: float) -> np.ndarray:
+        """``L`` ``(n, n)`` with ``L L^T = Q`` over ``[t, t + dt]``."""
+        q = self.process(dt, t)
         if self._q_sqrt is None:
             self._q_sqrt = psd_sqrt(q)
         return self._q_sqrt
@@ -83,6 +92,13 @@ class ModelNoise:
         if self._r_sqrt is None:
             self._r_sqrt = psd_sqrt(r)
         return self._r_sqrt
+
+
+def symmetrised(P: np.ndarray) -> np.ndarray:
+    """``(P + P^T) / 2`` ``(n, n)``."""
+    S = P + P.T
+    S *= 0.5
+    return S
 
 
 def readonly_view(a: np.ndarray) -> np.ndarray:
@@ -108,8 +124,8 @@ class _GaussianFilter(Filter):
         self._noise = ModelNoise(model)
         self.last_log_likelihood = 0.0
 
-    def initialize(self, mean: np.ndarray, cov: np.ndarray) -> None:
-        self._x, self._P = self._check_prior(mean, cov)
+    def initialize(self, mean: np.ndarray, cov: np.ndarray, t0: float = 0.0) -> None:
+        self._x, self._P = self._check_prior(mean, cov, t0)
         self.last_log_likelihood = 0.0
         self._remember(self._x, self._P)
         self.initialized = True
@@ -128,7 +144,8 @@ class ExtendedKF(_GaussianFilter):
     """Extended Kalman filter: transition and measurement linearised about the current mean.
 
     The update uses the measured rows only, wraps angular residuals through ``model.residual`` and
-    writes the covariance in Joseph form, symmetrised.
+    writes the covariance in Joseph form, symmetrised. The small products are ``ndarray.dot`` (less call
+    overhead than ``@`` on ``n x n`` matrices: the EKF's step is a few dozen such calls).
     """
 
     def __init__(self, model: StateSpaceModel, seed: int | np.random.Generator | None = None):
@@ -144,38 +161,40 @@ class ExtendedKF(_GaussianFilter):
         x = self._x[None]
         F = self.model.transition_jacobian(x, dt, self.time, u)[0]
         self._x = self.model.transition(x, dt, self.time, u)[0]
-        P = F @ self._P @ F.T + self._noise.process(dt)
-        self._P = 0.5 * (P + P.T)
+        P = F.dot(self._P).dot(F.T)
+        P += self._noise.process(dt, self.time)
+        self._P = symmetrised(P)
         self.time += dt
-        self._guard()
+        self._guard(False, self._x, self._P)
 
     def update(self, y: np.ndarray) -> None:
         """Condition on ``y`` ``(m,)``; NaN rows are not measured, an all-NaN ``y`` is a no-op."""
         measured = self._measured_rows(y)
         if measured is None:
             return
-        y, mask = measured
-        k = np.count_nonzero(mask)
+        y, mask, k = measured
         x = self._x[None]
-        hx, H = self.model.measure_and_jacobian(x)
+        hx, H = self.model.measure_and_jacobian(x, self.time)
         r, H = self.model.residual(y, hx[0]), H[0]
         if k < mask.shape[0]:
             r, H = r[mask], H[mask]
         R = self._noise.measurement(mask)
         P = self._P
-        HP = H @ P
-        S = HP @ H.T + R
+        HP = H.dot(P)
+        S = HP.dot(H.T)
+        S += R
         try:
             Kt, _, self.last_log_likelihood = innovation_solve(S, HP, r)
         except np.linalg.LinAlgError:
             self._recover("innovation covariance not positive definite")
             return
         K = Kt.T
-        self._x = self._x + K @ r
-        A = self._eye - K @ H
-        P = A @ P @ A.T + K @ R @ Kt
-        self._P = 0.5 * (P + P.T)
-        self._guard()
+        self._x = self._x + K.dot(r)
+        A = self._eye - K.dot(H)
+        P = A.dot(P).dot(A.T)
+        P += K.dot(R).dot(Kt)
+        self._P = symmetrised(P)
+        self._guard(True, self._x, self._P)
 
 
 class UnscentedKF(_GaussianFilter):
@@ -248,21 +267,20 @@ class UnscentedKF(_GaussianFilter):
         Y = self.model.transition(self._x + self._sigma_offsets(), dt, self.time, u)
         D = Y - Y[0]
         delta = self._w * D.sum(axis=0)
-        P = self._spread(D, delta) + self._noise.process(dt)
+        P = self._spread(D, delta) + self._noise.process(dt, self.time)
         self._x, self._P = Y[0] + delta, 0.5 * (P + P.T)
         self.time += dt
-        self._guard()
+        self._guard(False, self._x, self._P)
 
     def update(self, y: np.ndarray) -> None:
         """Condition on ``y`` ``(m,)``; NaN rows are not measured, an all-NaN ``y`` is a no-op."""
         measured = self._measured_rows(y)
         if measured is None:
             return
-        y, mask = measured
-        k = np.count_nonzero(mask)
+        y, mask, k = measured
         model = self.model
         E = self._sigma_offsets()
-        Z = model.measure(self._x + E)
+        Z = model.measure(self._x + E, self.time)
         dZ = model.residual(Z, Z[0])
         delta = model.measurement_mean(dZ, self._wm)
         mu = self._w * dZ.sum(axis=0)
@@ -280,4 +298,4 @@ class UnscentedKF(_GaussianFilter):
         self._x = self._x + s_r @ C
         P = self._P - C.T @ Kt
         self._P = 0.5 * (P + P.T)
-        self._guard()
+        self._guard(True, self._x, self._P)

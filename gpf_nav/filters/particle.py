@@ -6,12 +6,17 @@ The loop (deterministic drift in ``predict``, proposal + noise + weighting in ``
 resampling) is written once, in :class:`ParticleFilter`.
 
 Particles are stored as ``(n, N)`` so numpy works on long contiguous rows; models see the transposed
-``(N, n)`` view, whose columns are then contiguous.
+``(N, n)`` view, whose columns are then contiguous. Weighted sums over the particles are ``np.einsum``,
+never a BLAS vector product, which a threaded BLAS can stall on a busy machine (:mod:`gpf_nav.blas`).
 
-The process noise of an interval is drawn at the next ``update`` (``predict`` only accumulates the
-deterministic flow and the elapsed time). This keeps the proposal a proper Gaussian density
+The process noise of the last predicted interval is drawn at the next ``update`` (``predict`` moves
+the particles along the deterministic flow). This keeps the proposal a proper Gaussian density
 ``q(x_k | x_{k-1}, y_k) = N(flow(x_{k-1}) + shift, Q(dt))`` even when the node publishes predictions
-between measurements; between an update and the next one, :attr:`covariance` includes ``Q(dt)``.
+between measurements. A ``predict`` that finds the noise of an earlier interval still pending draws it
+first, so predict(dt1), predict(dt2), update(y) samples the same process as predict(dt1),
+update(NaN), predict(dt2), update(y): ``x2 = flow2(flow1(x0) + w1) + w2``, not
+``flow2(flow1(x0)) + w``, which differ for a nonlinear model. Until the next update, :attr:`covariance`
+includes the pending ``Q``.
 """
 from __future__ import annotations
 
@@ -65,9 +70,12 @@ class ParticleFilter(Filter):
         self._logw = np.full(self.n_particles, -np.log(self.n_particles))
         self._weights = np.full(self.n_particles, 1.0 / self.n_particles)
         self._pending_dt = 0.0
+        self._pending_t = 0.0
         self._R = np.asarray(model.measurement_noise(), dtype=float)
         self._whiteners: dict[bytes, tuple[np.ndarray, float]] = {}
-        self._noise_cache: tuple[float, np.ndarray | None, np.ndarray | None] = (-1.0, None, None)
+        self._time_varying_noise = model.time_varying_noise
+        self._noise_cache: tuple[tuple[float, float] | None, np.ndarray | None, np.ndarray | None] = \
+            (None, None, None)
         self.ess = 1.0
         self.resampled = False
         self.resample_count = 0
@@ -76,8 +84,8 @@ class ParticleFilter(Filter):
         self._costate_rows = np.zeros(model.measurement_dim, bool)
 
     # --- state ---------------------------------------------------------------------------------------
-    def initialize(self, mean, cov):
-        mean, cov = self._check_prior(mean, cov)
+    def initialize(self, mean, cov, t0=0.0):
+        mean, cov = self._check_prior(mean, cov, t0)
         z = self.rng.standard_normal((mean.size, self.n_particles))
         self._x = np.ascontiguousarray(mean[:, None] + psd_sqrt(cov) @ z)
         self._set_uniform_weights()
@@ -100,14 +108,14 @@ class ParticleFilter(Filter):
 
     @property
     def mean(self):
-        return self._x @ self._weights
+        return np.einsum("in,n->i", self._x, self._weights)  # not BLAS: see gpf_nav.blas
 
     @property
     def covariance(self):
         d = self._x - (self._x @ self._weights)[:, None]
         cov = (d * self._weights) @ d.T
         if self._pending_dt > 0.0:
-            cov = cov + self.model.process_noise(self._pending_dt)
+            cov = cov + self.model.process_noise(self._pending_dt, self._pending_t)
         return 0.5 * (cov + cov.T)
 
     @property
@@ -131,12 +139,13 @@ class ParticleFilter(Filter):
     @property
     def costate_mean(self) -> np.ndarray:
         """Weighted mean co-state ``(m,)``."""
-        return self._weights @ self._costate
+        return np.einsum("n,nk->k", self._weights, self._costate)
 
     @property
     def costate_norm_mean(self) -> float:
         """Weighted mean of the per-particle co-state norms."""
-        return float(self._weights @ np.sqrt(np.einsum("ij,ij->i", self._costate, self._costate)))
+        norms = np.sqrt(np.einsum("ij,ij->i", self._costate, self._costate))
+        return float(np.einsum("n,n->", self._weights, norms))
 
     @property
     def costate_norm_max(self) -> float:
@@ -149,8 +158,12 @@ class ParticleFilter(Filter):
         dt = self._check_dt(dt)
         if dt == 0.0:
             return
+        if self._pending_dt > 0.0:
+            factor = self._noise_factors(self._pending_dt)[0]
+            # a new array, so views handed out as `particles` keep their state
+            self._x = self._x + factor @ self.rng.standard_normal(self._x.shape)
         self._x = np.ascontiguousarray(self.model.transition(self._x.T, dt, self.time, u).T)
-        self._pending_dt += dt
+        self._pending_dt, self._pending_t = dt, self.time
         self.time += dt
         self._discard_non_finite()
 
@@ -213,16 +226,19 @@ class ParticleFilter(Filter):
             self._recover(f"ESS below 1.5 particles for {self.collapse_steps} updates")
 
     def _noise_factors(self, dt: float) -> tuple[np.ndarray, np.ndarray | None]:
-        """``(L, L^-1)`` with ``L L^T = Q(dt)``; ``L^-1`` is None when ``Q`` is not positive definite.
+        """``(L, L^-1)`` with ``L L^T = Q`` over the pending interval ``[t, t + dt]`` (``t`` its start);
+        ``L^-1`` is None when ``Q`` is not positive definite.
 
-        Cached for the last ``dt`` (measurements usually arrive at a fixed rate)."""
-        if self._noise_cache[0] != dt:
-            q = self.model.process_noise(dt)
+        Cached for the last ``dt`` (measurements usually arrive at a fixed rate), and the last ``t`` when
+        the model's ``process_noise`` takes ``t``."""
+        key = (dt, self._pending_t if self._time_varying_noise else 0.0)
+        if self._noise_cache[0] != key:
+            q = self.model.process_noise(dt, self._pending_t)
             chol = cholesky_or_none(q)
             if chol is None:
-                self._noise_cache = (dt, psd_sqrt(q), None)
+                self._noise_cache = (key, psd_sqrt(q), None)
             else:
-                self._noise_cache = (dt, chol, np.linalg.inv(chol))
+                self._noise_cache = (key, chol, np.linalg.inv(chol))
         return self._noise_cache[1], self._noise_cache[2]
 
     def _sample(self, x_pred: np.ndarray, y: np.ndarray, rows: np.ndarray, dt: float
@@ -281,7 +297,7 @@ class ParticleFilter(Filter):
     def _innovation(self, states: np.ndarray, y: np.ndarray, rows: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray]:
         """Jacobian ``(N, k, n)`` and innovation ``y - h(x)`` ``(N, k)`` of the measured rows."""
-        h, H = self.model.measure_and_jacobian(states)
+        h, H = self.model.measure_and_jacobian(states, self.time)
         return select_rows(H, rows), select_columns(self.model.residual(y, h), rows)
 
     # --- weighting -----------------------------------------------------------------------------------
@@ -304,7 +320,7 @@ class ParticleFilter(Filter):
 
     def _log_likelihood(self, x: np.ndarray, y: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """Gaussian ``log p(y_rows | x)`` ``(N,)`` for particles ``x`` ``(n, N)``."""
-        e = self.model.residual(y, self.model.measure(x.T)).T  # (m, N)
+        e = self.model.residual(y, self.model.measure(x.T, self.time)).T  # (m, N)
         w, constant = self._whitening(rows)
         e = e if rows.all() else e[rows]
         ew = e * w[:, None] if w.ndim == 1 else w @ e  # (k, N)

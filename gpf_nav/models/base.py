@@ -8,9 +8,17 @@ A model describes, batched over particles (arrays shaped ``(N, n)``):
 * a residual hook ``y - h(x)`` that wraps angular components to (-pi, pi].
 
 Filters never assume more than this, so a user model only has to subclass :class:`StateSpaceModel`.
+
+Time: every ``t`` a filter passes is its elapsed time in seconds since ``initialize(mean, cov, t0)``
+(``t0`` defaults to 0): the start of the interval for ``drift``, ``transition``, its Jacobian and
+``process_noise``, the time of the measurement for ``measure`` and its Jacobian. ``process_noise`` and
+the measurement methods may leave ``t`` out of their signature (a time-invariant ``Q`` or ``h``): the
+class then accepts and ignores it, so models written before ``t`` was passed keep working.
 """
 from __future__ import annotations
 
+import functools
+import inspect
 from abc import ABC, abstractmethod
 
 import numpy as np
@@ -24,15 +32,36 @@ def wrap_angle(a: np.ndarray) -> np.ndarray:
     return a - _TWO_PI * np.ceil((a - np.pi) * (1.0 / _TWO_PI))
 
 
-def _angle_columns(angular: np.ndarray) -> slice | np.ndarray | None:
-    """The angular components as a slice when they are consecutive (one wrap, no gather), else their
-    indices; None when there are none."""
-    index = np.flatnonzero(angular)
+@functools.lru_cache(maxsize=16)
+def _angle_columns(angular: bytes) -> slice | np.ndarray | None:
+    """The angular components of the mask ``angular`` (its bytes: cached, the residual runs at every
+    step) as a slice when they are consecutive (one wrap, no gather), else their indices; None when
+    there are none."""
+    index = np.flatnonzero(np.frombuffer(angular, dtype=bool))
     if index.size == 0:
         return None
     if index[-1] - index[0] + 1 == index.size:
         return slice(int(index[0]), int(index[-1]) + 1)
     return index
+
+
+_TIME_OPTIONAL = ("process_noise", "measure", "measurement_jacobian", "measure_and_jacobian")
+"""Methods whose ``t`` argument a model may leave out of its signature."""
+
+
+def _ignoring_time(method):
+    """``method(self, a)`` as ``method(self, a, t=0.0)``, marked ``time_invariant``."""
+    @functools.wraps(method)
+    def with_time(self, a, t=0.0):
+        return method(self, a)
+    del with_time.__wrapped__  # the signature shown is the one with ``t``
+    with_time.time_invariant = True
+    return with_time
+
+
+def time_invariant(method) -> bool:
+    """Whether a model method (e.g. ``type(model).process_noise``) ignores its ``t`` argument."""
+    return getattr(method, "time_invariant", False)
 
 
 class StateSpaceModel(ABC):
@@ -50,7 +79,19 @@ class StateSpaceModel(ABC):
         orthogonal_jacobian_rows: the rows of ``H`` are mutually orthogonal everywhere (true of
             range/azimuth/elevation, the gradients of spherical coordinates); lets the projection
             replace its small solve by a division when ``R`` is diagonal.
+
+    A discrete-time model (``x_{k+1} = F(x_k, k) + w_k``) is written as ``transition`` ignoring ``dt``
+    (the filter is then driven with ``predict(1.0)``, so ``t`` counts steps), ``process_noise`` the
+    covariance of ``w_k``, and ``drift`` the per-step increment ``F(x) - x`` (used only by the GPF's
+    ``increment`` reference). See ``docs/examples/bearings_only.py``.
     """
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        for name in _TIME_OPTIONAL:
+            method = cls.__dict__.get(name)
+            if callable(method) and "t" not in inspect.signature(method).parameters:
+                setattr(cls, name, _ignoring_time(method))
 
     state_dim: int
     measurement_dim: int
@@ -75,20 +116,28 @@ class StateSpaceModel(ABC):
         """Jacobian of :meth:`transition` with respect to ``x``: ``(N, n) -> (N, n, n)``."""
 
     @abstractmethod
-    def process_noise(self, dt: float) -> np.ndarray:
-        """Covariance ``(n, n)`` of the state noise accumulated over ``dt``."""
+    def process_noise(self, dt: float, t: float = 0.0) -> np.ndarray:
+        """Covariance ``(n, n)`` of the state noise accumulated over ``[t, t + dt]``.
+
+        Filters cache it per ``dt`` unless the model's signature takes ``t`` (then per ``(dt, t)``)."""
 
     @abstractmethod
-    def measure(self, x: np.ndarray) -> np.ndarray:
-        """Noise-free measurement ``h(x)``: ``(N, n) -> (N, m)``."""
+    def measure(self, x: np.ndarray, t: float = 0.0) -> np.ndarray:
+        """Noise-free measurement ``h(x, t)``: ``(N, n) -> (N, m)``."""
 
     @abstractmethod
-    def measurement_jacobian(self, x: np.ndarray) -> np.ndarray:
-        """Measurement Jacobian ``H(x)``: ``(N, n) -> (N, m, n)``."""
+    def measurement_jacobian(self, x: np.ndarray, t: float = 0.0) -> np.ndarray:
+        """Measurement Jacobian ``H(x, t)``: ``(N, n) -> (N, m, n)``."""
 
-    def measure_and_jacobian(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(h(x) (N, m), H(x) (N, m, n))`` together; override to share work between the two."""
-        return self.measure(x), self.measurement_jacobian(x)
+    @property
+    def time_varying_noise(self) -> bool:
+        """Whether ``process_noise`` depends on ``t`` (its signature takes ``t``): filters then cache
+        ``Q`` per ``(dt, t)`` instead of per ``dt``. A model that wraps another delegates this."""
+        return not time_invariant(type(self).process_noise)
+
+    def measure_and_jacobian(self, x: np.ndarray, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """``(h(x, t) (N, m), H(x, t) (N, m, n))`` together; override to share work between the two."""
+        return self.measure(x, t), self.measurement_jacobian(x, t)
 
     @abstractmethod
     def measurement_noise(self) -> np.ndarray:
@@ -100,15 +149,19 @@ class StateSpaceModel(ABC):
         Shapes broadcast: ``(m,)`` against ``(N, m)`` gives ``(N, m)``.
         """
         r = np.asarray(y, dtype=float) - y_pred
-        angles = _angle_columns(self.angular)
+        angles = _angle_columns(np.asarray(self.angular, dtype=bool).tobytes())
         if angles is not None:
-            r[..., angles] = wrap_angle(r[..., angles])
+            # wrap_angle, skipping its subtraction when no component needs it (the usual case)
+            turns = np.ceil((r[..., angles] - np.pi) * (1.0 / _TWO_PI))
+            if np.count_nonzero(turns):
+                r[..., angles] -= _TWO_PI * turns
         return r
 
     def measurement_mean(self, y: np.ndarray, weights: np.ndarray) -> np.ndarray:
         """Weighted mean of measurements ``(K, m)`` with weights ``(K,)``; angles by circular mean."""
-        mean = weights @ y
+        mean = np.einsum("k,km->m", weights, y)  # not BLAS: K may be an ensemble size
         if np.any(self.angular):
             a = y[:, self.angular]
-            mean[self.angular] = np.arctan2(weights @ np.sin(a), weights @ np.cos(a))
+            mean[self.angular] = np.arctan2(np.einsum("k,km->m", weights, np.sin(a)),
+                                            np.einsum("k,km->m", weights, np.cos(a)))
         return mean

@@ -62,7 +62,7 @@ class ModelErrorCompensation(StateSpaceModel):
         p = len(driven)
         self.state_dim = n + p
         self.measurement_dim = base.measurement_dim
-        self.angular = base.angular
+        self.angular = getattr(base, "angular", None)  # a missing mask is reported by the validation
         self.position_index = tuple(base.position_index)
         self.velocity_index = tuple(base.velocity_index)
         self.measured_state_index = (tuple(base.measured_state_index)
@@ -71,7 +71,7 @@ class ModelErrorCompensation(StateSpaceModel):
         self.compensation_index = tuple(range(n, n + p))
         self._n, self._p = n, p
         self._A = self._linear_chain()
-        self._noise_cache: tuple[float, np.ndarray | None] = (math.nan, None)
+        self._noise_cache: tuple[tuple[float, float] | None, np.ndarray | None] = (None, None)
 
     # --- the linear part driven by a ------------------------------------------------------------------
     def _linear_chain(self) -> np.ndarray:
@@ -123,16 +123,21 @@ class ModelErrorCompensation(StateSpaceModel):
         J[:, self._n:, self._n:] = decay * np.eye(self._p)
         return J
 
-    def process_noise(self, dt):
-        """Base ``Q(dt)`` plus the Gauss-Markov part; cached for the last ``dt`` (the base model's noise
-        is taken as fixed, as the filters' own noise caches do)."""
+    @property
+    def time_varying_noise(self) -> bool:
+        return self.base.time_varying_noise
+
+    def process_noise(self, dt, t=0.0):
+        """Base ``Q`` over ``[t, t + dt]`` plus the Gauss-Markov part; cached for the last ``dt`` (and the
+        last ``t`` when the base model's noise varies with time, see ``time_varying_noise``)."""
         dt = float(dt)
-        if self._noise_cache[0] != dt:
+        key = (dt, float(t) if self.base.time_varying_noise else 0.0)
+        if self._noise_cache[0] != key:
             Q = np.zeros((self.state_dim, self.state_dim))
-            Q[:self._n, :self._n] = self.base.process_noise(dt)
+            Q[:self._n, :self._n] = self.base.process_noise(dt, t)
             Q += self._compensation_noise(dt)
             Q.flags.writeable = False
-            self._noise_cache = (dt, Q)
+            self._noise_cache = (key, Q)
         return self._noise_cache[1]
 
     def _compensation_noise(self, dt: float) -> np.ndarray:
@@ -144,14 +149,14 @@ class ModelErrorCompensation(StateSpaceModel):
         return _van_loan(self._A.tobytes(), self.state_dim, self._n,
                          2.0 * self.acceleration_std ** 2 / self.time_constant, dt)
 
-    def measure(self, x):
-        return self.base.measure(x[:, :self._n])
+    def measure(self, x, t=0.0):
+        return self.base.measure(x[:, :self._n], t)
 
-    def measurement_jacobian(self, x):
-        return self._pad(self.base.measurement_jacobian(x[:, :self._n]))
+    def measurement_jacobian(self, x, t=0.0):
+        return self._pad(self.base.measurement_jacobian(x[:, :self._n], t))
 
-    def measure_and_jacobian(self, x):
-        h, H = self.base.measure_and_jacobian(x[:, :self._n])
+    def measure_and_jacobian(self, x, t=0.0):
+        h, H = self.base.measure_and_jacobian(x[:, :self._n], t)
         return h, self._pad(H)
 
     def _pad(self, H: np.ndarray) -> np.ndarray:

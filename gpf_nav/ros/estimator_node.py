@@ -21,6 +21,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from std_srvs.srv import Trigger
 
 from gpf_nav.allocator import retain_freed_memory
+from gpf_nav.blas import limit_blas_threads
 from gpf_nav.ros import shutdown
 from gpf_nav.ros.estimator_core import INPUT_TOPICS, OUTPUT_TOPICS, EstimatorCore
 from gpf_nav.ros.factory import FILTERS
@@ -101,6 +102,7 @@ def main(argv: list[str] | None = None) -> int:
     """Console script ``estimator``: returns 2 (after a FATAL log line) on invalid parameters, 0 when
     stopped by SIGINT or SIGTERM (:mod:`gpf_nav.ros.shutdown`)."""
     retain_freed_memory()
+    limit_blas_threads()
     stop = shutdown.init_without_signal_handlers(sys.argv if argv is None else argv)
     try:
         node = EstimatorNode()
