@@ -188,3 +188,22 @@ def test_default_gpf_gates_an_outlier_but_its_costate_still_shows_it():
     assert np.linalg.norm(faulty.mean[:3] - clean.mean[:3]) < 100.0
     assert abs(faulty.costate_mean[0]) > 20 * abs(clean.costate_mean[0])
     assert faulty.costate_measured.all()
+
+
+def test_default_gpf_keeps_the_kalman_covariance_on_a_near_deterministic_model():
+    """With process noise 1e-4 of the measurement noise the cloud is never renewed by the dynamics;
+    kernel smoothing and moment matching keep it on the Kalman posterior over 300 steps."""
+    model = constant_velocity_model(accel_std=1e-4)
+    prior_mean, prior_cov = np.array([0.0, 1.0]), np.diag([100.0, 1.0])
+    for seed in range(3):
+        ys = simulate(model, prior_mean, 300, DT, seed=seed)
+        exact_mean, exact_cov = kalman(model, prior_mean, prior_cov, ys, DT)[-1]
+        f = GeometricProjectionPF(model, n_particles=500, seed=seed, **NO_COMPENSATION)
+        f.initialize(prior_mean, prior_cov)
+        for y in ys:
+            f.predict(DT)
+            f.update(y)
+        # (measured: at most 0.13 and 0.19 sigma; without moment matching 0.30 and 0.45)
+        ratio = np.diag(f.covariance) / np.diag(exact_cov)
+        assert np.all(np.abs(np.log(ratio)) < 0.2), ratio
+        assert np.all(np.abs(f.mean - exact_mean) < 0.3 * np.sqrt(np.diag(exact_cov)))

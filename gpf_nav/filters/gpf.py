@@ -87,6 +87,9 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
             deviations is not used (counted in :attr:`gated`; its co-state is still computed, so the
             integrity monitor sees it); 0 disables the gate.
         outlier_gate_limit: consecutive refusals of a component after which it is used anyway.
+        moment_matching: cloud metric: give the weighted cloud the exact mean and covariance of the
+            mixture of proposals after each update (and back after a resampling); False leaves the
+            sampled moments (for comparison: docs/filters.md).
         resampling: resampling scheme name.
         ess_threshold: tau in (0, 1].
         seed: seed of the filter's random generator.
@@ -98,7 +101,8 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
                  unmodelled_acceleration_std: float = UNMODELLED_ACCELERATION_STD,
                  unmodelled_acceleration_time: float = UNMODELLED_ACCELERATION_TIME,
                  kernel_bandwidth: float | None = None, outlier_gate: float = OUTLIER_GATE,
-                 outlier_gate_limit: int = OUTLIER_GATE_LIMIT, resampling: str = "systematic",
+                 outlier_gate_limit: int = OUTLIER_GATE_LIMIT, moment_matching: bool = True,
+                 resampling: str = "systematic",
                  ess_threshold: float = 0.5, seed: int | np.random.Generator | None = None,
                  collapse_steps: int = 0):
         if reference not in REFERENCES:
@@ -115,6 +119,9 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
             raise ValueError(f"regularization must be positive, got {regularization}")
         if kernel_bandwidth is not None and not 0.0 < float(kernel_bandwidth) < 1.0:
             raise ValueError(f"kernel_bandwidth must lie in (0, 1), got {kernel_bandwidth}")
+        if not (outlier_gate >= 0.0 and int(outlier_gate_limit) >= 0):
+            raise ValueError(f"outlier_gate and outlier_gate_limit must be >= 0, got {outlier_gate}, "
+                             f"{outlier_gate_limit}")
         model = self._compensate(model, unmodelled_acceleration_std, unmodelled_acceleration_time)
         super().__init__(model, n_particles, resampling, ess_threshold, seed, collapse_steps)
         self.reference = reference
@@ -127,10 +134,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         self._input = None
         self._proposal = None
         self._weighted_moments = None
-        self.moment_correction = True
-        if not (outlier_gate >= 0.0 and int(outlier_gate_limit) >= 0):
-            raise ValueError(f"outlier_gate and outlier_gate_limit must be >= 0, got {outlier_gate}, "
-                             f"{outlier_gate_limit}")
+        self.moment_matching = bool(moment_matching)
         self.outlier_gate = float(outlier_gate)
         self.outlier_gate_limit = int(outlier_gate_limit)
         self.gated = 0
@@ -195,7 +199,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         proposal_means += centres
         x = C @ prior_z
         x += proposal_means
-        if self.moment_correction:
+        if self.moment_matching:
             spread = C @ (np.eye(n) - G.T @ np.linalg.solve(S, G)) @ C.T  # (I - K H) D
             self._proposal = (proposal_means, spread)
         if self.weighting == "likelihood":
