@@ -100,13 +100,3 @@ def _as_index(columns: tuple[int, ...]) -> slice | list[int]:
     if columns == list(range(columns[0], columns[-1] + 1)):
         return slice(columns[0], columns[-1] + 1)
     return columns
-
-
-@lru_cache(maxsize=64)
-def _as_index(columns: tuple[int, ...]) -> slice | list[int]:
-    """A slice (a view, no copy) when ``columns`` are consecutive, else the list of indices."""
-    columns = list(columns)
-    if columns == list(range(columns[0], columns[-1] + 1)):
-        return slice(columns[0], columns[-1] + 1)
-    return columns
-
