@@ -119,6 +119,7 @@ def test_simulator_to_estimator_on_sim_time_tracks_truth(ros):
     truth = ros.record(Odometry, "truth/odometry")
     ess = ros.record(Float64, "gpf/ess")
     costate = ros.record(Vector3Stamped, "gpf/costate")
+    acceleration = ros.record(Vector3Stamped, "gpf/unmodelled_acceleration")
     particles = ros.record(PoseArray, "gpf/particles")
     clock = ros.record(ClockMsg, "/clock")
     diagnostics = ros.record(DiagnosticArray, "/diagnostics")
@@ -167,8 +168,16 @@ def test_simulator_to_estimator_on_sim_time_tracks_truth(ros):
     assert ess and all(0.0 < m.data <= 1.0 for m in ess)
     assert costate and all(math.isfinite(v) for m in costate for v in (m.vector.x, m.vector.y, m.vector.z))
     assert particles and 0 < len(particles[-1].poses) <= 100
+    # the default GPF's estimated unmodelled acceleration (the scenario's gravity is 9 % off): finite,
+    # in the world frame, a fraction of a m/s^2, and in the diagnostics with its standard deviations
+    assert acceleration and all(m.header.frame_id == "moon_inertial" for m in acceleration)
+    last = acceleration[-1].vector
+    assert all(math.isfinite(v) for m in acceleration for v in (m.vector.x, m.vector.y, m.vector.z))
+    assert 0.0 < math.hypot(last.x, last.y, last.z) < 1.0
     status = _latest_status(diagnostics)
     values = parse_values(status)
+    assert len(values["unmodelled acceleration [m/s^2]"].split()) == 3
+    assert all(float(v) > 0.0 for v in values["unmodelled acceleration std [m/s^2]"].split())
     assert values["initialized from"] == "measurements"
     assert sim.published["measurement"] == 100
     assert int(values["measurements accepted"]) >= 95
