@@ -20,12 +20,18 @@ def optimal_bandwidth(n_particles: int, dim: int) -> float:
     return float((4.0 / (n_particles * (dim + 2.0))) ** (1.0 / (dim + 4.0)))
 
 
+def weighted_moments(x: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(mean (n,), deviations x - mean (n, N), covariance (n, n))`` of the cloud ``x`` ``(n, N)`` with
+    normalised ``weights`` ``(N,)``."""
+    mean = x @ weights
+    d = x - mean[:, None]
+    return mean, d, (d * weights) @ d.T
+
+
 def shrink(x: np.ndarray, weights: np.ndarray, bandwidth: float) -> tuple[np.ndarray, np.ndarray]:
     """Kernel centres ``(n, N)`` and kernel covariance ``h^2 P`` ``(n, n)`` of the cloud ``x`` ``(n, N)``
     with normalised ``weights`` ``(N,)``."""
-    mean = x @ weights
-    d = x - mean[:, None]
-    cov = (d * weights) @ d.T
+    mean, _, cov = weighted_moments(x, weights)
     a = np.sqrt(1.0 - bandwidth ** 2)
     centres = a * x
     centres += ((1.0 - a) * mean)[:, None]
@@ -36,9 +42,7 @@ def match_moments(x: np.ndarray, weights: np.ndarray, mean: np.ndarray, cov: np.
     """The cloud ``x`` ``(n, N)`` moved by an affine map so that its weighted mean and covariance are
     ``mean`` ``(n,)`` and ``cov`` ``(n, n)`` exactly: ``mean + L_cov L_x^-1 (x - m_x)``. Unchanged when the
     cloud's covariance is singular (nothing to map from) or ``cov`` is not positive definite."""
-    m = x @ weights
-    d = x - m[:, None]
-    current = (d * weights) @ d.T
+    _, d, current = weighted_moments(x, weights)
     if not np.all(np.isfinite(current)):
         return x
     try:
