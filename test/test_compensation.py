@@ -114,3 +114,61 @@ def test_default_gpf_converges_to_the_kalman_posterior_of_the_augmented_model():
 
     small, large = error(300), error(4800)
     assert large < small / 2.0 and large < 0.05
+
+
+def _lunar_states(rng: np.random.Generator, n: int) -> np.ndarray:
+    """``(n, 6)`` states of low lunar orbits in random planes."""
+    r = rng.normal(size=(n, 3))
+    r *= 1.8e6 / np.linalg.norm(r, axis=1, keepdims=True)
+    v = np.cross(r, rng.normal(size=(n, 3)))
+    v *= 1.6e3 / np.linalg.norm(v, axis=1, keepdims=True)
+    return np.hstack([r, v])
+
+
+def test_lunar_frame_is_radial_along_track_cross_track():
+    x = _lunar_states(np.random.default_rng(3), 50)
+    x = np.vstack([x, [[1.8e6, 0, 0, 10.0, 0, 0]], [[0, 0, 0, 0, 1.0, 0]], [[np.nan] * 6]])
+    frame = LunarDescentModel().compensation_frame(x)
+    assert frame.shape == (53, 3, 3)
+    np.testing.assert_allclose(np.einsum("nki,nkj->nij", frame, frame), np.broadcast_to(np.eye(3), (53, 3, 3)),
+                               atol=1e-12)
+    np.testing.assert_allclose(np.linalg.det(frame), 1.0, atol=1e-12)  # right-handed
+    r, v = x[:50, :3], x[:50, 3:]
+    np.testing.assert_allclose(frame[:50, :, 0], r / np.linalg.norm(r, axis=1, keepdims=True), atol=1e-12)
+    assert np.all(np.einsum("ni,ni->n", frame[:50, :, 1], v) > 0)  # along-track: the way the orbit goes
+    assert np.allclose(np.einsum("ni,ni->n", frame[:50, :, 2], v), 0.0, atol=1e-9)
+    np.testing.assert_allclose(frame[-1], np.eye(3))  # a non-finite state: the world's axes
+
+
+def test_acceleration_fixed_in_the_local_frame_is_carried_with_it():
+    """A radial 0.1 m/s^2 stays radial as the orbit turns: after a quarter orbit the compensation state
+    has turned with the radius, not stayed on the world axis it started on (decay aside)."""
+    base = LunarDescentModel()
+    model = ModelErrorCompensation(base, time_constant=1e6, acceleration_std=0.1)
+    x0 = _lunar_states(np.random.default_rng(4), 4)
+    radial = x0[:, :3] / np.linalg.norm(x0[:, :3], axis=1, keepdims=True)
+    x = np.hstack([x0, 0.1 * radial])
+    for _ in range(900):
+        x = model.transition(x, 2.0)
+    a, r = x[:, 6:], x[:, :3]
+    decay = np.exp(-1800.0 / 1e6)
+    np.testing.assert_allclose(a, 0.1 * decay * r / np.linalg.norm(r, axis=1, keepdims=True), atol=1e-12)
+    assert np.all(np.einsum("ni,ni->n", radial, r / np.linalg.norm(r, axis=1, keepdims=True)) < 0.9)
+
+
+def test_framed_transition_jacobian_matches_finite_differences():
+    model = ModelErrorCompensation(LunarDescentModel(), time_constant=1e6, acceleration_std=0.1)
+    x = np.hstack([_lunar_states(np.random.default_rng(5), 1), [[0.05, -0.02, 0.01]]])
+    J = model.transition_jacobian(x, 2.0)[0]
+    step = np.array([1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3, 1e-4, 1e-4, 1e-4])
+    numeric = np.empty((9, 9))
+    for j in range(9):
+        e = np.zeros(9)
+        e[j] = step[j]
+        numeric[:, j] = (model.transition(x + e, 2.0)[0] - model.transition(x - e, 2.0)[0]) / (2 * step[j])
+    np.testing.assert_allclose(J[:6], numeric[:6], rtol=1e-5, atol=1e-7)
+    # the frame's own dependence on the state is left out of J by design: how a turns with x (order
+    # dt |a| / |v| per m/s, |a| / |r| per m), and with a itself (a changes the velocity, which turns it)
+    np.testing.assert_allclose(J[6:, :6], numeric[6:, :6], atol=1e-7)
+    np.testing.assert_allclose(J[6:, 6:], numeric[6:, 6:], atol=2e-4)
+    assert not np.allclose(J[6:, 6:], np.eye(3) * J[6, 6], atol=1e-4)  # the turn itself is in J

@@ -17,7 +17,7 @@ from gpf_nav.models.validation import validate_model
 
 UNMODELLED_ACCELERATION_STD = 0.1
 """Default stationary standard deviation of the unmodelled acceleration (state units / s^2; m/s^2)."""
-UNMODELLED_ACCELERATION_TIME = 1.0e4
+UNMODELLED_ACCELERATION_TIME = 1.0e6
 """Default correlation time of the unmodelled acceleration, s."""
 
 

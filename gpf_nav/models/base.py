@@ -135,6 +135,15 @@ class StateSpaceModel(ABC):
         ``Q`` per ``(dt, t)`` instead of per ``dt``. A model that wraps another delegates this."""
         return not time_invariant(type(self).process_noise)
 
+    def compensation_frame(self, x: np.ndarray) -> np.ndarray | None:
+        """Local frame an estimated unmodelled acceleration is carried in (dynamic model compensation,
+        :mod:`gpf_nav.models.compensation`): ``(N, n) -> (N, p, p)`` orthonormal matrices whose columns are
+        the frame's axes in the coordinates of the ``p`` velocity components, or None (the default): the
+        state's own fixed axes. A model whose unmodelled forces keep their direction in a moving frame (an
+        orbit's radial / along-track / cross-track axes, a vehicle's body axes) returns that frame, so the
+        compensation need not re-learn a force each time the frame turns."""
+        return None
+
     def measure_and_jacobian(self, x: np.ndarray, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """``(h(x, t) (N, m), H(x, t) (N, m, n))`` together; override to share work between the two."""
         return self.measure(x, t), self.measurement_jacobian(x, t)

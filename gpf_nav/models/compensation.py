@@ -7,13 +7,21 @@ model without velocities, as an extra drift on every state) and follow a first-o
     dx = (f(x, t, u) + B a) dt + G dB,        da = -a / tau dt + sigma sqrt(2 / tau) dW.
 
 ``sigma`` is the stationary standard deviation of the unmodelled acceleration and ``tau`` its correlation
-time. Nothing here knows what the error is (a gravity scale, a thrust, drag or a mis-modelled field are
+time. When the base model declares a local frame (:meth:`StateSpaceModel.compensation_frame`, e.g. an
+orbit's radial / along-track / cross-track axes), ``a`` is carried with that frame: between steps it turns
+as the frame turns, so a force that keeps its direction in the frame (a gravity-field error is radial,
+drag and thrust are along-track) is a constant to the compensation, not a rotating vector it must keep
+re-learning. Nothing here knows what the error is (a gravity scale, a thrust, drag or a mis-modelled field are
 all "an acceleration the nominal drift does not have"); the filter estimates ``a`` from the measurements.
 
 Over a step, ``a`` enters the base transition through the exact response of a double integrator (position
 ``tau (dt - tau (1 - e))``, velocity ``tau (1 - e)`` per unit ``a``, ``e = exp(-dt / tau)``); the process
 noise is the base ``Q(dt)`` plus the exact Gauss-Markov covariance propagated through the same kinematic
-chain (Van Loan's matrix exponential), cached per ``dt``.
+chain (Van Loan's matrix exponential), cached per ``dt``. The noise of ``a`` is isotropic, so the frame's
+turn over one step (a few milliradians) is left out of it; the EKF's Jacobian keeps the turn of ``a`` but
+not the frame's own dependence on ``x`` (a term of order ``|a| / |r|``). ``drift`` gives ``a``'s decay only
+(the frame's turn is a property of the step, not of the instant; only the GPF's ``increment`` reference
+reads ``drift``, through ``H``, which does not see ``a``).
 """
 from __future__ import annotations
 
@@ -70,6 +78,9 @@ class ModelErrorCompensation(StateSpaceModel):
         self.orthogonal_jacobian_rows = base.orthogonal_jacobian_rows
         self.compensation_index = tuple(range(n, n + p))
         self._n, self._p = n, p
+        # a local frame needs a acting on velocities (its axes are given in their coordinates)
+        self._framed = bool(base.velocity_index) and type(base).compensation_frame is not \
+            StateSpaceModel.compensation_frame
         self._A = self._linear_chain()
         self._noise_cache: tuple[tuple[float, float] | None, np.ndarray | None] = (None, None)
 
@@ -111,7 +122,11 @@ class ModelErrorCompensation(StateSpaceModel):
         out[:, self.acceleration_of] += a * G[self.acceleration_of[0], 0]
         if self._integrated_into is not None:
             out[:, self._integrated_into] += a * G[self._integrated_into[0], 0]
-        np.multiply(a, decay, out=out[:, self._n:])
+        turn = self._turn(xb, out[:, :self._n])
+        if turn is None:
+            np.multiply(a, decay, out=out[:, self._n:])
+        else:
+            np.einsum("nij,nj->ni", turn, a * decay, out=out[:, self._n:])
         return out
 
     def transition_jacobian(self, x, dt, t=0.0, u=None):
@@ -120,8 +135,19 @@ class ModelErrorCompensation(StateSpaceModel):
         J = np.zeros((x.shape[0], self.state_dim, self.state_dim))
         J[:, :self._n, :self._n] = self.base.transition_jacobian(xb, dt, t, u)
         J[:, :self._n, self._n:] = G
-        J[:, self._n:, self._n:] = decay * np.eye(self._p)
+        turn = self._turn(xb, self.base.transition(xb, dt, t, u)) if self._framed else None
+        J[:, self._n:, self._n:] = decay * (np.eye(self._p) if turn is None else turn)
         return J
+
+    def _turn(self, before: np.ndarray, after: np.ndarray) -> np.ndarray | None:
+        """Rotation ``(N, p, p)`` carrying a vector fixed in the base model's local frame from the states
+        ``before`` to ``after`` ``(N, n)``, or None without a local frame."""
+        if not self._framed:
+            return None
+        start, end = self.base.compensation_frame(before), self.base.compensation_frame(after)
+        if start is None or end is None:
+            return None
+        return np.einsum("nik,njk->nij", end, start)
 
     @property
     def time_varying_noise(self) -> bool:

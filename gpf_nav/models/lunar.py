@@ -123,6 +123,27 @@ class LunarDescentModel(StateSpaceModel):
                 state = self.transition(state, h, t, u)
         return phi
 
+    def compensation_frame(self, x):
+        """Radial, along-track and cross-track axes ``(N, 3, 3)`` (columns) of the osculating orbit at
+        ``x`` ``(N, 6)``: the frame of orbit determination's empirical accelerations, in which gravity-field
+        errors (radial), drag and thrust (along-track) keep their direction. Where the orbit plane is
+        undefined (``r`` parallel to ``v``) the cross-track axis is any one normal to ``r``; at the
+        Moon's centre, or for a non-finite ``x``, the frame is the world's."""
+        r, v = x[:, :3], x[:, 3:6]
+        radial = r / np.maximum(np.linalg.norm(r, axis=1), _MIN_RANGE)[:, None]
+        normal = np.cross(radial, v)
+        size = np.linalg.norm(normal, axis=1)
+        flat = ~(size > 1e-12 * np.maximum(np.linalg.norm(v, axis=1), 1.0))
+        if np.any(flat):  # any axis normal to r: the cross product with the least-aligned base axis
+            base = np.eye(3)[np.argmin(np.abs(radial[flat]), axis=1)]
+            normal[flat] = np.cross(radial[flat], base)
+            size[flat] = np.linalg.norm(normal[flat], axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):  # r = 0: no frame, replaced below
+            normal /= size[:, None]
+        frame = np.stack([radial, np.cross(normal, radial), normal], axis=2)
+        frame[~np.isfinite(frame).all(axis=(1, 2))] = np.eye(3)  # at the Moon's centre, or a non-finite x
+        return frame
+
     def process_noise(self, dt):
         q = self.accel_noise_density ** 2
         dt = abs(float(dt))

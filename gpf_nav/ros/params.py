@@ -36,7 +36,7 @@ ESTIMATOR = [
     Spec("metric", "cloud", "GPF projection metric: cloud (predicted cloud's covariance; navigation default), euclidean (paper) or process_noise (metric of Q(dt))."),
     Spec("regularization", 0.0, "Tikhonov eps of the projection, >= 0; 0: the metric's default (1 for cloud, 1e-6 otherwise); relative for euclidean, in measurement-noise units otherwise."),
     Spec("unmodelled_acceleration_std", 0.1, "gpf: stationary std of the estimated unmodelled acceleration [m/s^2]; 0 turns the compensation off."),
-    Spec("unmodelled_acceleration_time", 1.0e4, "gpf: correlation time of the unmodelled acceleration [s], > 0."),
+    Spec("unmodelled_acceleration_time", 1.0e6, "gpf: correlation time of the unmodelled acceleration [s], > 0."),
     Spec("kernel_bandwidth", 0.0, "gpf, cloud metric: kernel bandwidth h in (0, 1); 0: the Gaussian-optimal one for N and the state dimension."),
     Spec("collapse_steps", 0, "gpf/spf: re-initialise after this many consecutive updates with ESS < 1.5 particles; 0 never."),
     Spec("resampling", "systematic", "Resampling scheme: systematic, stratified, residual or multinomial."),
