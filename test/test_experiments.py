@@ -147,6 +147,27 @@ def test_sweep_smoke(tmp_path):
         assert (tmp_path / "sweep_mismatch.png").stat().st_size > 10_000
 
 
+def test_sweep_merge_reruns_only_the_named_rows(tmp_path):
+    first, second = tmp_path / "first", tmp_path / "second"
+    common = ["sweep", "--param", "mismatch", "--values", "0.1", "--runs", "2", "--workers", "1", "--cases",
+              "full", "--no-plots", "--no-progress"] + SHORT
+    assert cli.main(common + ["--filters", "ekf,spf", "--out", str(first)]) == 0
+    earlier = json.loads((first / "sweep_mismatch.json").read_text())
+    assert cli.main(common + ["--filters", "ekf,ekf-comp", "--out", str(second),
+                              "--merge", str(first / "sweep_mismatch.json")]) == 0
+    merged = json.loads((second / "sweep_mismatch.json").read_text())
+    rows = merged["cases"]["full"]["filters"]
+    assert list(rows) == ["EKF", "SPF", runner.EKF_COMPENSATED]
+    assert rows["SPF"] == earlier["cases"]["full"]["filters"]["SPF"]  # kept
+    assert rows["EKF"] == earlier["cases"]["full"]["filters"]["EKF"]  # re-run: deterministic
+    assert rows[runner.EKF_COMPENSATED]["position_rmse_km"][0]["n"] == 2
+    assert merged["meta"]["rerun"] == ["EKF", runner.EKF_COMPENSATED]
+    assert merged["meta"]["earlier"] == earlier["meta"]
+    with pytest.raises(SystemExit):  # not the same sweep: 3 runs against 2
+        sweep_main = common + ["--filters", "ekf", "--out", str(second), "--merge", str(first / "sweep_mismatch.json")]
+        cli.main([a if a != "2" else "3" for a in sweep_main])
+
+
 def test_cli_rejects_unknown_filter(tmp_path):
     with pytest.raises(SystemExit):
         montecarlo.main(["--runs", "1", "--filters", "KF9000", "--out", str(tmp_path)] + SHORT)

@@ -11,11 +11,17 @@ same random numbers at every point (paired design), so the curves differ only by
 Writes ``sweep_<param>.json`` (``values``, and ``cases -> case -> filters -> filter -> metric -> list of
 {mean, std, n}`` with one entry per value, plus failures) and ``sweep_<param>.png`` into ``--out``.
 The co-state / degeneracy figure comes from ``gpf-nav montecarlo`` (it needs the per-step series).
+
+``--merge REPORT`` re-runs only ``--filters`` and puts their rows into an earlier report of the same
+sweep (same values, runs, seed, particles and scenario; refused otherwise), keeping its other rows: the
+paired design makes each row independent of the others, so a changed filter need not cost a whole
+campaign. The merged report's ``meta`` names the rows it re-ran and keeps the earlier ``meta``.
 """
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import sys
 import time
 from pathlib import Path
@@ -85,6 +91,33 @@ def sweep(param: str, values, config, cases, runs: int, seed: int, filters, n_pa
     return report
 
 
+MERGE_KEYS = ("runs", "seed", "n_particles", "divergence_km", "base_config")
+"""Settings two reports must share for their rows to be merged."""
+
+
+def merge(earlier: dict, update: dict) -> dict:
+    """``earlier`` with the rows of ``update``'s filters replaced (or added); raises ValueError when the
+    two are not the same sweep."""
+    same = (earlier.get("schema") == update["schema"] and earlier.get("param") == update["param"]
+            and earlier.get("values") == update["values"]
+            and all(earlier["settings"].get(k) == update["settings"][k] for k in MERGE_KEYS)
+            and set(update["cases"]) <= set(earlier["cases"]))
+    if not same:
+        raise ValueError("the report to merge into is not the same sweep (param, values, cases, runs, seed, "
+                         "particles and scenario must agree)")
+    merged = json.loads(json.dumps(earlier))
+    names = update["settings"]["filters"]
+    merged["settings"]["filters"] = list(dict.fromkeys(merged["settings"]["filters"] + list(names)))
+    for case, entry in update["cases"].items():
+        target = merged["cases"][case]
+        for name in names:
+            target["filters"][name] = entry["filters"][name]
+            target["failures"][name] = entry["failures"][name]
+        target["oracle_multiplier"].update(entry["oracle_multiplier"])
+    merged["meta"] = dict(update.get("meta", {}), rerun=list(names), earlier=earlier.get("meta"))
+    return merged
+
+
 TABLES = {"position_rmse_km": "position RMSE (km)", "velocity_rmse_mps": "velocity RMSE (m/s)",
           "nees": "mean NEES (6 states; consistent: 6)"}
 
@@ -134,6 +167,9 @@ def main(argv: list[str] | None = None) -> int:
     add_common_arguments(parser, runs=20)
     parser.add_argument("--out", type=Path, default=Path("sweep-results"),
                         help="output directory (default ./sweep-results)")
+    parser.add_argument("--merge", type=Path, default=None, metavar="REPORT",
+                        help="an earlier sweep_<param>.json of the same sweep: re-run only --filters and "
+                             "write that report with their rows replaced")
     args = parser.parse_args(argv)
     field, defaults, label = PARAMETERS[args.param]
     try:
@@ -143,6 +179,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         config = base_config(args)
         cases, filters = parse_cases(args.cases), parse_filters(args.filters)
+        earlier = json.loads(args.merge.read_text()) if args.merge else None
     except (ValueError, OSError) as err:
         parser.error(str(err))
     commit = git_commit()  # the code this process runs; read before a long campaign
@@ -151,6 +188,11 @@ def main(argv: list[str] | None = None) -> int:
                    args.divergence_km, args.workers, args.scheduler, not args.no_progress)
     wall = time.perf_counter() - start
     report["meta"] = run_metadata(args, wall, ["sweep"] + argv, commit)
+    if earlier is not None:
+        try:
+            report = merge(earlier, json.loads(json.dumps(report)))
+        except ValueError as err:
+            parser.error(f"--merge {args.merge}: {err}")
     args.out.mkdir(parents=True, exist_ok=True)
     json_path = args.out / f"sweep_{args.param}.json"
     md_path = args.out / f"sweep_{args.param}.md"
