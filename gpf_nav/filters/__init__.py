@@ -4,7 +4,8 @@ from gpf_nav.filters.compensated import CompensatedEKF
 from gpf_nav.filters.ensemble import EnsembleKF
 from gpf_nav.filters.gpf import GeometricProjectionPF
 from gpf_nav.filters.kalman import ExtendedKF, UnscentedKF
+from gpf_nav.filters.multiple_model import MultipleModelGPF
 from gpf_nav.filters.particle import BootstrapPF, ParticleFilter
 
 __all__ = ["Filter", "ParticleFilter", "BootstrapPF", "GeometricProjectionPF", "ExtendedKF",
-           "UnscentedKF", "EnsembleKF", "CompensatedEKF"]
+           "UnscentedKF", "EnsembleKF", "CompensatedEKF", "MultipleModelGPF"]

@@ -24,6 +24,7 @@ import numpy as np
 
 from gpf_nav import resampling as resamplers
 from gpf_nav.filters.base import Filter
+from gpf_nav.filters.kernel import match_moments
 from gpf_nav.filters.projection import project
 from gpf_nav.linalg import cholesky_or_none, psd_sqrt
 from gpf_nav.models.base import StateSpaceModel
@@ -117,6 +118,15 @@ class ParticleFilter(Filter):
         if self._pending_dt > 0.0:
             cov = cov + self.model.process_noise(self._pending_dt, self._pending_t)
         return 0.5 * (cov + cov.T)
+
+    def set_moments(self, mean: np.ndarray, cov: np.ndarray) -> None:
+        """Move the cloud by an affine map so that its weighted mean and covariance are ``mean`` ``(n,)``
+        and ``cov`` ``(n, n)``, keeping its shape (the hand-over of an interacting multiple model). Noise
+        still pending from a ``predict`` is added on top; nothing changes when either covariance is
+        singular."""
+        self._require_initialized()
+        self._x = match_moments(self._x, self._weights, np.asarray(mean, dtype=float),
+                                np.asarray(cov, dtype=float))
 
     @property
     def normalized_ess(self) -> float:

@@ -1,0 +1,186 @@
+"""Interacting multiple models: the GPF on the nominal model and on the compensated model, side by side.
+
+Model-error compensation (:mod:`gpf_nav.models.compensation`) makes a filter robust to an unmodelled
+acceleration, and costs accuracy when there is none: it estimates three extra states that a correct
+model does not need. :class:`MultipleModelGPF` tests the hypothesis instead of assuming it. Two GPFs run
+in parallel, one on the user's model as it is (``nominal``) and one with the compensation
+(``compensated``); a two-state Markov chain switches between them with mean sojourn ``switch_time``.
+Each cycle is Blom's interacting multiple model (IMM):
+
+1. **Mixing**, at the first ``predict`` after an update: with ``mu`` the model probabilities and
+   ``p = 1 - exp(-dt / switch_time)`` the switching probability over that ``dt``, each member's cloud is
+   moved (an affine map, :func:`gpf_nav.filters.kernel.match_moments`) to the mean and covariance of the
+   mixture ``sum_i mu_{i|j} N(m_i, P_i)``, ``mu_{i|j} = p_ij mu_i / c_j``, ``c_j = sum_i p_ij mu_i``. The
+   nominal member has no acceleration state: handed to the compensated one, it contributes its prior,
+   ``N(0, sigma^2 I)``.
+2. Each member predicts and updates on its own model.
+3. **Model probabilities** ``mu_j ∝ c_j p(y | j)``, ``p(y | j)`` the member's incremental evidence
+   (:attr:`ParticleFilter.log_likelihood`, exact for the GPF's corrected weights). When the two members
+   did not weigh the same measurement (one gated a component, or re-initialised), ``mu = c``.
+
+The estimate is the mixture ``sum_j mu_j N(m_j, P_j)`` (mean and covariance of the user's state); the
+unmodelled acceleration is the compensated member's, times its probability (the nominal model says
+there is none).
+
+What it buys and costs on the lunar descent is measured in ``docs/results.md``: the accuracy of the
+nominal filter when the model is right, at twice the cost of one GPF; it is not the default because the
+test is weak where the error is small and poorly observable (Case 2 with an unmodelled 0.02 m/s^2 force).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from gpf_nav.filters.gpf import GeometricProjectionPF
+from gpf_nav.models.base import StateSpaceModel
+
+SWITCH_TIME = 2.0e5
+"""Default mean sojourn time of the model chain, s (switching probability 1e-5 per 2 s step)."""
+
+
+class MultipleModelGPF:
+    """IMM over a nominal and a compensated :class:`GeometricProjectionPF` (module docstring).
+
+    Args:
+        model: the user's state-space model.
+        n_particles: particles of each member.
+        switch_time: mean sojourn time of the model chain, s (> 0).
+        seed: seed of the two members' random streams (spawned from it).
+        **options: further options of both members (:class:`GeometricProjectionPF`); the compensation
+            options (``unmodelled_acceleration_std`` > 0, ``unmodelled_acceleration_time``) apply to the
+            compensated one.
+
+    Attributes:
+        nominal, compensated: the two member filters.
+        model_probabilities: ``(2,)`` probabilities of the nominal and the compensated model.
+    """
+
+    def __init__(self, model: StateSpaceModel, n_particles: int = 500, switch_time: float = SWITCH_TIME,
+                 seed: int | np.random.Generator | None = None, **options):
+        if not (math.isfinite(switch_time) and switch_time > 0):
+            raise ValueError(f"switch_time must be positive, got {switch_time}")
+        if options.get("unmodelled_acceleration_std", 1.0) == 0.0:
+            raise ValueError("the compensated member needs unmodelled_acceleration_std > 0")
+        streams = np.random.SeedSequence(np.random.default_rng(seed).integers(2 ** 63)).spawn(2)
+        nominal_options = {k: v for k, v in options.items() if not k.startswith("unmodelled_acceleration")}
+        self.nominal = GeometricProjectionPF(model, n_particles, unmodelled_acceleration_std=0.0,
+                                             seed=np.random.default_rng(streams[0]), **nominal_options)
+        self.compensated = GeometricProjectionPF(model, n_particles, seed=np.random.default_rng(streams[1]),
+                                                 **options)
+        self.model = model
+        self.switch_time = float(switch_time)
+        self.model_probabilities = np.full(2, 0.5)
+        self._predicted_probabilities = self.model_probabilities
+        self._mix_due = False
+
+    @property
+    def members(self) -> tuple[GeometricProjectionPF, GeometricProjectionPF]:
+        return self.nominal, self.compensated
+
+    # --- the filter interface ------------------------------------------------------------------------
+    def initialize(self, mean, cov, t0: float = 0.0) -> None:
+        """Both members from the user's prior ``N(mean (n,), cov (n, n))``; model probabilities 1/2."""
+        for member in self.members:
+            member.initialize(mean, cov, t0)
+        self.model_probabilities = np.full(2, 0.5)
+        self._predicted_probabilities = self.model_probabilities
+        self._mix_due = False
+
+    def predict(self, dt: float, u: np.ndarray | None = None) -> None:
+        if self._mix_due and dt > 0.0:
+            self._mix(1.0 - math.exp(-dt / self.switch_time))
+        for member in self.members:
+            member.predict(dt, u)
+
+    def update(self, y: np.ndarray) -> None:
+        before = [(m.gated, m.recoveries) for m in self.members]
+        for member in self.members:
+            member.update(y)
+        comparable = all((m.gated, m.recoveries) == b for m, b in zip(self.members, before))
+        mu = self._predicted_probabilities
+        if comparable:
+            evidence = np.array([m.log_likelihood for m in self.members])
+            mu = mu * np.exp(evidence - evidence.max())
+        self.model_probabilities = mu / mu.sum()
+        self._predicted_probabilities = self.model_probabilities
+        self._mix_due = True
+
+    def _mix(self, p: float) -> None:
+        """IMM mixing with switching probability ``p`` (module docstring, step 1)."""
+        mu = self.model_probabilities
+        chain = np.array([[1.0 - p, p], [p, 1.0 - p]])
+        predicted = chain.T @ mu
+        weights = chain * mu[:, None] / predicted[None, :]  # weights[i, j] = mu_{i|j}
+        moments = [self._augmented(self.nominal), (self.compensated.augmented_mean,
+                                                   self.compensated.augmented_covariance)]
+        n = self.model.state_dim
+        mean, cov = _mixture(weights[:, 0], moments)
+        self.nominal.set_moments(mean[:n], cov[:n, :n])
+        self.compensated.set_moments(*_mixture(weights[:, 1], moments))
+        self._predicted_probabilities = predicted
+        self._mix_due = False
+
+    def _augmented(self, member: GeometricProjectionPF) -> tuple[np.ndarray, np.ndarray]:
+        """The nominal member's estimate with the compensation's prior appended: ``(n + p,)``, ``(n + p, n + p)``."""
+        return self.compensated.model.augment_prior(member.mean, member.covariance)
+
+    # --- the estimate --------------------------------------------------------------------------------
+    @property
+    def time(self) -> float:
+        return self.compensated.time
+
+    @property
+    def initialized(self) -> bool:
+        return self.compensated.initialized
+
+    @property
+    def recoveries(self) -> int:
+        return self.nominal.recoveries + self.compensated.recoveries
+
+    @property
+    def mean(self) -> np.ndarray:
+        return _mixture(self.model_probabilities, self._estimates())[0]
+
+    @property
+    def covariance(self) -> np.ndarray:
+        return _mixture(self.model_probabilities, self._estimates())[1]
+
+    def _estimates(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        return [(m.mean, m.covariance) for m in self.members]
+
+    @property
+    def unmodelled_acceleration(self) -> np.ndarray:
+        """Model-averaged unmodelled acceleration ``(p,)`` (the nominal model's is zero)."""
+        return self.model_probabilities[1] * self.compensated.unmodelled_acceleration
+
+    @property
+    def unmodelled_acceleration_covariance(self) -> np.ndarray:
+        """Its covariance ``(p, p)``."""
+        a = self.compensated.unmodelled_acceleration
+        zero = (np.zeros_like(a), np.zeros((a.size, a.size)))
+        return _mixture(self.model_probabilities,
+                        [zero, (a, self.compensated.unmodelled_acceleration_covariance)])[1]
+
+    # --- particle diagnostics, model-averaged ----------------------------------------------------------
+    @property
+    def ess(self) -> float:
+        """Probability-weighted ESS/N of the members' last updates."""
+        return float(sum(mu * m.ess for mu, m in zip(self.model_probabilities, self.members)))
+
+    @property
+    def costate_norm_mean(self) -> float:
+        """Probability-weighted mean co-state norm of the members."""
+        return float(sum(mu * m.costate_norm_mean for mu, m in zip(self.model_probabilities, self.members)))
+
+    @property
+    def resampled(self) -> bool:
+        """Whether either member resampled at the last update."""
+        return self.nominal.resampled or self.compensated.resampled
+
+
+def _mixture(weights, moments: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """Mean ``(d,)`` and covariance ``(d, d)`` of ``sum_i weights_i N(m_i, P_i)``."""
+    mean = sum(w * m for w, (m, _) in zip(weights, moments))
+    cov = sum(w * (P + np.outer(m - mean, m - mean)) for w, (m, P) in zip(weights, moments))
+    return mean, 0.5 * (cov + cov.T)
