@@ -35,6 +35,7 @@ from gpf_nav.experiments.montecarlo import (add_common_arguments, base_config, g
                                             per_run_values, run_metadata, write_json)
 from gpf_nav.experiments.parallel import map_tasks
 from gpf_nav.experiments.runner import PARTICLE_FILTERS, RunTask, run_task, select_oracle
+from gpf_nav.scenario import ScenarioConfig
 
 SCHEMA = "gpf_nav.sweep/2"
 COLUMNS = {"position_rmse_km": ("position_rmse", 1e-3), "velocity_rmse_mps": ("velocity_rmse", 1.0),
@@ -91,17 +92,20 @@ def sweep(param: str, values, config, cases, runs: int, seed: int, filters, n_pa
     return report
 
 
-MERGE_KEYS = ("runs", "seed", "n_particles", "divergence_km", "base_config")
-"""Settings two reports must share for their rows to be merged."""
+MERGE_KEYS = ("runs", "seed", "n_particles", "divergence_km")
+"""Settings two reports must share for their rows to be merged (and the scenario, ``base_config``)."""
 
 
 def merge(earlier: dict, update: dict) -> dict:
     """``earlier`` with the rows of ``update``'s filters replaced (or added); raises ValueError when the
     two are not the same sweep."""
+    def scenario(report: dict) -> ScenarioConfig:  # a field added since the earlier report has its default
+        return ScenarioConfig.from_dict(report["settings"]["base_config"])
+
     same = (earlier.get("schema") == update["schema"] and earlier.get("param") == update["param"]
             and earlier.get("values") == update["values"]
             and all(earlier["settings"].get(k) == update["settings"][k] for k in MERGE_KEYS)
-            and set(update["cases"]) <= set(earlier["cases"]))
+            and scenario(earlier) == scenario(update) and set(update["cases"]) <= set(earlier["cases"]))
     if not same:
         raise ValueError("the report to merge into is not the same sweep (param, values, cases, runs, seed, "
                          "particles and scenario must agree)")
