@@ -135,7 +135,7 @@ FILTERS = (GPF_NAV, EKF_COMPENSATED, "EKF, oracle-tuned Q", "UKF, oracle-tuned Q
 (the same compensation; oracle-tuned process noise), then the paper's rows."""
 EXTRA_FILTERS = (GPF_MULTIPLE_MODEL, GPF_QMETRIC)
 """Filters that can be asked for with ``--filters`` but are not part of the default campaign."""
-PARTICLE_FILTERS = (GPF_NAV, GPF_DEFAULT, GPF_PRINTED, GPF_EXACT, GPF_QMETRIC, "SPF")
+PARTICLE_FILTERS = (GPF_NAV, GPF_MULTIPLE_MODEL, GPF_DEFAULT, GPF_PRINTED, GPF_EXACT, GPF_QMETRIC, "SPF")
 """Filters that have an ESS and a co-state."""
 
 
