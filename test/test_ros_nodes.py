@@ -113,7 +113,8 @@ def _assert_diagnostics_finite(diagnostics):
 
 
 # --- simulator -> estimator ---------------------------------------------------------------------------
-def test_simulator_to_estimator_on_sim_time_tracks_truth(ros):
+@pytest.mark.parametrize("filter_name", ["gpf", "gpf-mm"])
+def test_simulator_to_estimator_on_sim_time_tracks_truth(ros, filter_name):
     sim_seconds, start = 200.0, 1000.0
     odom = ros.record(Odometry, "odometry/filtered")
     truth = ros.record(Odometry, "truth/odometry")
@@ -128,6 +129,7 @@ def test_simulator_to_estimator_on_sim_time_tracks_truth(ros):
     # stamps, no IMU) lose none of them, and every wait below is on a condition, not a duration.
     est = ros.add(EstimatorNode(context=ros.context, parameter_overrides=[
         Parameter("use_sim_time", value=True), Parameter("n_particles", value=300),
+        Parameter("filter", value=filter_name),
         Parameter("diagnostics_period", value=0.5), Parameter("queue_depth", value=200)]))
     sim = ros.add(SimulatorNode(context=ros.context, parameter_overrides=[
         Parameter("rate_factor", value=25.0), Parameter("scenario.duration", value=sim_seconds),
@@ -178,6 +180,8 @@ def test_simulator_to_estimator_on_sim_time_tracks_truth(ros):
     values = parse_values(status)
     assert len(values["unmodelled acceleration [m/s^2]"].split()) == 3
     assert all(float(v) > 0.0 for v in values["unmodelled acceleration std [m/s^2]"].split())
+    probability = values["compensated model probability"]
+    assert probability == "n/a" if filter_name == "gpf" else 0.0 <= float(probability) <= 1.0
     assert values["initialized from"] == "measurements"
     assert sim.published["measurement"] == 100
     assert int(values["measurements accepted"]) >= 95

@@ -121,6 +121,8 @@ def test_make_filter_runs_every_filter(name):
     (dict(name="gpf", ess_threshold=1.5), "(0, 1]"),
     (dict(name="gpf", weighting="nope"), "'weighting'"),
     (dict(name="enkf", n_particles=1), "'n_particles' = 1 must be an integer >= 2"),
+    (dict(name="gpf-mm", unmodelled_acceleration_std=0.0), "'unmodelled_acceleration_std' = 0.0 must be positive"),
+    (dict(name="gpf-mm", model_switch_time=-1.0), "'model_switch_time' = -1.0 must be positive"),
 ])
 def test_make_filter_refuses_with_the_parameter_name(options, text):
     name = options.pop("name")

@@ -164,6 +164,18 @@ class MultipleModelGPF:
 
     # --- particle diagnostics, model-averaged ----------------------------------------------------------
     @property
+    def particles(self) -> np.ndarray:
+        """Both members' particles ``(2N, n)`` in the user's state: with :attr:`weights`, a weighted
+        sample of the mixture."""
+        n = self.model.state_dim
+        return np.vstack([self.nominal.particles, self.compensated.particles[:, :n]])
+
+    @property
+    def weights(self) -> np.ndarray:
+        """Weights ``(2N,)`` of :attr:`particles`: each member's, times its model probability."""
+        return np.concatenate([mu * m.weights for mu, m in zip(self.model_probabilities, self.members)])
+
+    @property
     def ess(self) -> float:
         """Probability-weighted ESS/N of the members' last updates."""
         return float(sum(mu * m.ess for mu, m in zip(self.model_probabilities, self.members)))
@@ -174,9 +186,39 @@ class MultipleModelGPF:
         return float(sum(mu * m.costate_norm_mean for mu, m in zip(self.model_probabilities, self.members)))
 
     @property
+    def costate_mean(self) -> np.ndarray:
+        """Probability-weighted mean co-state ``(m,)`` of the members (what the integrity monitor tests)."""
+        return sum(mu * m.costate_mean for mu, m in zip(self.model_probabilities, self.members))
+
+    @property
+    def costate_measured(self) -> np.ndarray:
+        """Components ``(m,)`` bool the last co-state covers (both members')."""
+        return self.nominal.costate_measured & self.compensated.costate_measured
+
+    @property
+    def costate_norm_max(self) -> float:
+        """Largest per-particle co-state norm of either member."""
+        return max(m.costate_norm_max for m in self.members)
+
+    @property
     def resampled(self) -> bool:
         """Whether either member resampled at the last update."""
         return self.nominal.resampled or self.compensated.resampled
+
+    @property
+    def resample_count(self) -> int:
+        """Resamplings of both members."""
+        return self.nominal.resample_count + self.compensated.resample_count
+
+    @property
+    def gated(self) -> int:
+        """Measurement components refused by the innovation gate, both members."""
+        return self.nominal.gated + self.compensated.gated
+
+    @property
+    def last_recovery_reason(self) -> str | None:
+        """Why a member last re-initialised itself, or None."""
+        return self.compensated.last_recovery_reason or self.nominal.last_recovery_reason
 
 
 def _mixture(weights, moments: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:

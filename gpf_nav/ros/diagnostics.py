@@ -92,6 +92,8 @@ def filter_status(engine, now_ns: int | None, thresholds: Thresholds, filter_nam
         ("outlier components gated", str(stats.get("gated", "n/a"))),
         ("unmodelled acceleration [m/s^2]", _vector(stats.get("unmodelled_acceleration"))),
         ("unmodelled acceleration std [m/s^2]", _vector(stats.get("unmodelled_acceleration_std"))),
+        ("compensated model probability", _fmt(stats["compensated_model_probability"])
+         if "compensated_model_probability" in stats else "n/a"),
         ("measurements accepted", str(accepted)),
         ("measurements rejected", str(rejected)),
         ("messages rejected", str(c.total_rejected)),

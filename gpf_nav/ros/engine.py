@@ -487,7 +487,9 @@ class EstimatorEngine:
             out["costate_norm_max"] = float(f.costate_norm_max)
         if hasattr(f, "gated"):
             out["gated"] = int(f.gated)
-        if getattr(f, "compensated", False):
+        if hasattr(f, "model_probabilities"):
+            out["compensated_model_probability"] = float(f.model_probabilities[1])
+        if np.size(getattr(f, "unmodelled_acceleration", ())):  # a filter with compensation on
             acceleration = np.asarray(f.unmodelled_acceleration, dtype=float)
             sigma = np.sqrt(np.clip(np.diag(f.unmodelled_acceleration_covariance), 0.0, None))
             if np.all(np.isfinite(acceleration)) and np.all(np.isfinite(sigma)):

@@ -10,10 +10,11 @@ import math
 import numpy as np
 
 from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME
+from gpf_nav.filters.multiple_model import SWITCH_TIME
 from gpf_nav.models.lunar import LunarDescentModel
 
-FILTERS = ("gpf", "spf", "ekf", "ukf", "enkf")
-PARTICLE_FILTERS = ("gpf", "spf")
+FILTERS = ("gpf", "gpf-mm", "spf", "ekf", "ukf", "enkf")
+PARTICLE_FILTERS = ("gpf", "gpf-mm", "spf")
 
 
 def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 0,
@@ -21,7 +22,7 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
                 metric: str = "cloud", regularization: float = 0.0,
                 unmodelled_acceleration_std: float = UNMODELLED_ACCELERATION_STD,
                 unmodelled_acceleration_time: float = UNMODELLED_ACCELERATION_TIME,
-                kernel_bandwidth: float = 0.0, collapse_steps: int = 0,
+                kernel_bandwidth: float = 0.0, model_switch_time: float = SWITCH_TIME, collapse_steps: int = 0,
                 resampling: str = "systematic", ess_threshold: float = 0.5, compute_costate: bool = True,
                 ukf_alpha: float = 1e-3, ukf_beta: float = 2.0, ukf_kappa: float = 0.0):
     """Build the filter called ``name`` (one of :data:`FILTERS`) on ``model``.
@@ -38,19 +39,21 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
                                   ukf_kappa=ukf_kappa, state_dim=model.state_dim,
                                   unmodelled_acceleration_std=unmodelled_acceleration_std,
                                   unmodelled_acceleration_time=unmodelled_acceleration_time,
-                                  kernel_bandwidth=kernel_bandwidth)
+                                  kernel_bandwidth=kernel_bandwidth, model_switch_time=model_switch_time)
     if errors:
         raise ValueError("; ".join(errors))
     seed = None if seed is None or int(seed) < 0 else int(seed)
-    if name == "gpf":
-        from gpf_nav.filters import GeometricProjectionPF
-        return GeometricProjectionPF(model, int(n_particles), reference=reference, weighting=weighting,
-                                     metric=metric, regularization=regularization or None,
-                                     unmodelled_acceleration_std=unmodelled_acceleration_std,
-                                     unmodelled_acceleration_time=unmodelled_acceleration_time,
-                                     kernel_bandwidth=kernel_bandwidth or None, resampling=resampling,
-                                     ess_threshold=ess_threshold, seed=seed,
-                                     collapse_steps=int(collapse_steps))
+    if name in ("gpf", "gpf-mm"):
+        from gpf_nav.filters import GeometricProjectionPF, MultipleModelGPF
+        options = dict(reference=reference, weighting=weighting, metric=metric,
+                       regularization=regularization or None,
+                       unmodelled_acceleration_std=unmodelled_acceleration_std,
+                       unmodelled_acceleration_time=unmodelled_acceleration_time,
+                       kernel_bandwidth=kernel_bandwidth or None, resampling=resampling,
+                       ess_threshold=ess_threshold, seed=seed, collapse_steps=int(collapse_steps))
+        if name == "gpf-mm":
+            return MultipleModelGPF(model, int(n_particles), switch_time=model_switch_time, **options)
+        return GeometricProjectionPF(model, int(n_particles), **options)
     if name == "spf":
         from gpf_nav.filters import BootstrapPF
         return BootstrapPF(model, int(n_particles), resampling=resampling, ess_threshold=ess_threshold,
@@ -84,7 +87,8 @@ def _core_class(class_name: str):
 def check_filter_options(name, *, n_particles, reference, weighting, regularization, resampling,
                          ess_threshold, metric="cloud", collapse_steps=0, ukf_alpha=1e-3,
                          ukf_kappa=0.0, state_dim=6, unmodelled_acceleration_std=0.0,
-                         unmodelled_acceleration_time=1.0, kernel_bandwidth=0.0) -> list[str]:
+                         unmodelled_acceleration_time=1.0, kernel_bandwidth=0.0,
+                         model_switch_time=SWITCH_TIME) -> list[str]:
     """Human-readable errors for invalid filter parameters (empty when all are valid)."""
     from gpf_nav import resampling as resamplers
     from gpf_nav.filters.gpf import METRICS, REFERENCES, WEIGHTINGS
@@ -92,7 +96,7 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
     if name not in FILTERS:
         errors.append(f"parameter 'filter' = {name!r} is not a known filter; choose one of {', '.join(FILTERS)}")
         return errors
-    if name in ("gpf", "spf", "enkf"):
+    if name in ("gpf", "gpf-mm", "spf", "enkf"):
         minimum = 2 if name == "enkf" else 1
         if not isinstance(n_particles, (int, np.integer)) or n_particles < minimum:
             errors.append(f"parameter 'n_particles' = {n_particles!r} must be an integer >= {minimum}")
@@ -106,7 +110,13 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
             errors.append(f"parameter 'regularization' = {regularization!r} must be >= 0 (0: default)")
         if not isinstance(collapse_steps, (int, np.integer)) or collapse_steps < 0:
             errors.append(f"parameter 'collapse_steps' = {collapse_steps!r} must be an integer >= 0")
-    if name == "gpf":
+    if name == "gpf-mm":
+        if not unmodelled_acceleration_std > 0.0:
+            errors.append(f"parameter 'unmodelled_acceleration_std' = {unmodelled_acceleration_std!r} must be "
+                          "positive for gpf-mm (its second model is the compensated one) [m/s^2]")
+        if not (math.isfinite(model_switch_time) and model_switch_time > 0.0):
+            errors.append(f"parameter 'model_switch_time' = {model_switch_time!r} must be positive [s]")
+    if name in ("gpf", "gpf-mm"):
         if reference not in REFERENCES:
             errors.append(f"parameter 'reference' = {reference!r} must be one of {', '.join(REFERENCES)}")
         if weighting not in WEIGHTINGS:
