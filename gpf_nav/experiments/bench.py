@@ -1,6 +1,7 @@
 """``gpf-nav bench``: per-step cost (one ``predict`` + one ``update``) of every filter on the lunar model.
 
-"GPF" is the default (navigation-grade) configuration, "GPF-paper" the paper's (:data:`PAPER_GPF`).
+"GPF" is the default (navigation-grade) configuration, "GPF-paper" the paper's (:data:`PAPER_GPF`),
+"GPF-mm" the multiple-model option (two GPFs of N particles each).
 Each filter runs on the same seeded lunar-descent measurements. A step is timed over a block of
 steps; the reported figure is the median block time per step over ``--repeats`` blocks, after a warm-up.
 The GPF/SPF ratio compares figures measured in the same run. ``gpf-nav bench`` runs with the heap
@@ -19,7 +20,8 @@ import numpy as np
 
 from gpf_nav import allocator
 from gpf_nav.cli import CommandParser, positive_int
-from gpf_nav.filters import BootstrapPF, EnsembleKF, ExtendedKF, GeometricProjectionPF, UnscentedKF
+from gpf_nav.filters import (BootstrapPF, EnsembleKF, ExtendedKF, GeometricProjectionPF, MultipleModelGPF,
+                             UnscentedKF)
 from gpf_nav.scenario import ScenarioConfig, filter_model, generate
 
 PARTICLE_COUNTS = (500, 10_000, 100_000)
@@ -35,6 +37,7 @@ def _cases(particle_counts) -> list[tuple[str, int | None, object]]:
         cases.append(("GPF", n, lambda model, seed, n=n: GeometricProjectionPF(model, n, seed=seed)))
         cases.append(("GPF-paper", n, lambda model, seed, n=n: GeometricProjectionPF(model, n, seed=seed,
                                                                                  **PAPER_GPF)))
+        cases.append(("GPF-mm", n, lambda model, seed, n=n: MultipleModelGPF(model, n, seed=seed)))
         cases.append(("SPF", n, lambda model, seed, n=n: BootstrapPF(model, n, seed=seed)))
     cases.append(("EKF", None, lambda model, seed: ExtendedKF(model, seed=seed)))
     cases.append(("UKF", None, lambda model, seed: UnscentedKF(model, seed=seed)))
