@@ -112,8 +112,8 @@ class MultipleModelGPF:
         chain = np.array([[1.0 - p, p], [p, 1.0 - p]])
         predicted = chain.T @ mu
         weights = chain * mu[:, None] / predicted[None, :]  # weights[i, j] = mu_{i|j}
-        moments = [self._augmented(self.nominal), (self.compensated.augmented_mean,
-                                                   self.compensated.augmented_covariance)]
+        moments = [self._nominal_augmented(), (self.compensated.augmented_mean,
+                                               self.compensated.augmented_covariance)]
         n = self.model.state_dim
         mean, cov = _mixture(weights[:, 0], moments)
         self.nominal.set_moments(mean[:n], cov[:n, :n])
@@ -121,9 +121,10 @@ class MultipleModelGPF:
         self._predicted_probabilities = predicted
         self._mix_due = False
 
-    def _augmented(self, member: GeometricProjectionPF) -> tuple[np.ndarray, np.ndarray]:
-        """The nominal member's estimate with the compensation's prior appended: ``(n + p,)``, ``(n + p, n + p)``."""
-        return self.compensated.model.augment_prior(member.mean, member.covariance)
+    def _nominal_augmented(self) -> tuple[np.ndarray, np.ndarray]:
+        """The nominal member's estimate with the compensation's prior appended: mean ``(n + p,)`` and
+        covariance ``(n + p, n + p)``."""
+        return self.compensated.model.augment_prior(self.nominal.mean, self.nominal.covariance)
 
     # --- the estimate --------------------------------------------------------------------------------
     @property

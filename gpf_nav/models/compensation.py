@@ -11,8 +11,9 @@ time. When the base model declares a local frame (:meth:`StateSpaceModel.compens
 orbit's radial / along-track / cross-track axes), ``a`` is carried with that frame: between steps it turns
 as the frame turns, so a force that keeps its direction in the frame (a gravity-field error is radial,
 drag and thrust are along-track) is a constant to the compensation, not a rotating vector it must keep
-re-learning. Nothing here knows what the error is (a gravity scale, a thrust, drag or a mis-modelled field are
-all "an acceleration the nominal drift does not have"); the filter estimates ``a`` from the measurements.
+re-learning. Nothing here knows what the error is (a gravity scale, a thrust, drag or a mis-modelled
+field are all "an acceleration the nominal drift does not have"); the filter estimates ``a`` from the
+measurements.
 
 Over a step, ``a`` enters the base transition through the exact response of a double integrator (position
 ``tau (dt - tau (1 - e))``, velocity ``tau (1 - e)`` per unit ``a``, ``e = exp(-dt / tau)``); the process
