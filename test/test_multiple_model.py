@@ -40,13 +40,19 @@ def test_an_unmodelled_acceleration_selects_the_compensated_model():
     sd = np.sqrt(np.diag(exact_cov))
     np.testing.assert_array_less(np.abs(f.mean - exact_mean[:2]), 0.3 * sd[:2])
     assert abs(f.unmodelled_acceleration[0] - exact_mean[2]) < 0.3 * sd[2]
-    # the nominal member alone is far off: the test is not passed by the mixture being everywhere
+    # the nominal member alone is far off: the test is not passed by the mixture being everywhere. Its
+    # velocity error over the second half, in posterior standard deviations (RMS; the last step alone
+    # ranges 0.2-8 over seeds and BLAS kernels: it follows the rounding, the RMS stays above 3.9)
     nominal = GeometricProjectionPF(constant_velocity(), 1000, seed=0, unmodelled_acceleration_std=0.0)
     nominal.initialize(MEAN, COV)
-    for y in ys:
+    linear = augmented_linear(constant_velocity())
+    prior = np.diag([COV[0, 0], COV[1, 1], SIGMA ** 2])
+    errors = []
+    for y, (m, P) in zip(ys, kalman(linear, np.append(MEAN, 0.0), prior, ys, 1.0)):
         nominal.predict(1.0)
         nominal.update(y)
-    assert abs(nominal.mean[1] - exact_mean[1]) > 3.0 * sd[1]
+        errors.append((nominal.mean[1] - m[1]) / np.sqrt(P[1, 1]))
+    assert np.sqrt(np.mean(np.square(errors[len(ys) // 2:]))) > 3.0
 
 
 def test_set_moments_gives_the_cloud_the_requested_moments():
