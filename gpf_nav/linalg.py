@@ -2,11 +2,14 @@
 
 Matrices are ``(m, m, N)`` and vectors ``(m, N)`` so every entry is a contiguous row of length N.
 Symmetric positive definite solves of dimension up to 3 are written in closed form (much faster than
-``np.linalg.solve`` on many tiny systems); larger ones fall back to LAPACK.
+``np.linalg.solve`` on many tiny systems); larger ones fall back to LAPACK. The factorisations of single
+small matrices call LAPACK directly: numpy's wrappers cost several times the work on a 9 x 9 matrix, and
+the filters factor a few at every step.
 """
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg.lapack import dpotrf, dtrtri
 
 
 def psd_sqrt(cov: np.ndarray) -> np.ndarray:
@@ -23,11 +26,19 @@ def psd_sqrt(cov: np.ndarray) -> np.ndarray:
 
 
 def cholesky_or_none(cov: np.ndarray) -> np.ndarray | None:
-    """Cholesky factor of a symmetric ``(n, n)`` matrix, or None when it is not positive definite."""
-    try:
-        return np.linalg.cholesky(0.5 * (cov + cov.T))
-    except np.linalg.LinAlgError:
-        return None
+    """Lower Cholesky factor of a symmetric ``(n, n)`` matrix (of its symmetric part), or None when it is
+    not positive definite. A non-finite entry gives a non-finite factor, not None."""
+    factor, info = dpotrf(0.5 * (cov + cov.T), lower=1, clean=1)
+    return factor if info == 0 else None
+
+
+def triangular_inverse(factor: np.ndarray) -> np.ndarray:
+    """Inverse ``(n, n)`` of a lower-triangular ``factor`` with a positive diagonal and a zero upper
+    triangle (a factor of :func:`cholesky_or_none`)."""
+    inverse, info = dtrtri(factor, lower=1)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"triangular factor is singular (dtrtri info={info})")
+    return inverse
 
 
 def solve_spd(S: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -207,3 +207,11 @@ def test_default_gpf_keeps_the_kalman_covariance_on_a_near_deterministic_model()
         ratio = np.diag(f.covariance) / np.diag(exact_cov)
         assert np.all(np.abs(np.log(ratio)) < 0.2), ratio
         assert np.all(np.abs(f.mean - exact_mean) < 0.3 * np.sqrt(np.diag(exact_cov)))
+
+
+def test_set_moments_with_a_singular_target_leaves_the_cloud_alone():
+    f = GeometricProjectionPF(constant_velocity_model(), n_particles=100, seed=1, **NO_COMPENSATION)
+    f.initialize(PRIOR_MEAN, PRIOR_COV)
+    before = f.particles.copy()
+    f.set_moments(np.zeros(2), np.zeros((2, 2)))
+    np.testing.assert_array_equal(f.particles, before)

@@ -41,7 +41,7 @@ from gpf_nav.filters.compensated import (UNMODELLED_ACCELERATION_STD, UNMODELLED
 from gpf_nav.filters.kernel import match_moments, optimal_bandwidth, shrink
 from gpf_nav.filters.particle import ParticleFilter, gaussian_shift_correction, select_rows
 from gpf_nav.filters.projection import project
-from gpf_nav.linalg import cholesky_or_none
+from gpf_nav.linalg import cholesky_or_none, triangular_inverse
 from gpf_nav.models.base import StateSpaceModel
 
 REFERENCES = ("innovation", "increment")
@@ -155,13 +155,15 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
 
         In whitened coordinates (``x = centre + C w``, ``D = C C^T``; ``W R W^T = I``; ``G = W H C``;
         ``S = G G^T + eps I``): ``w = z + G^T S^-1 (W r + sqrt(eps) v - G z)`` with ``z``, ``v`` standard
-        normal is an exact draw of ``q = N(centre + K r, (I - K H) D)``, ``K = C G^T S^-1 W``.
+        normal is an exact draw of ``q = N(centre + K r, (I - K H) D)``, ``K = C G^T S^-1 W``. Every solve
+        with ``S`` goes through the inverse ``L^-1`` of its Cholesky factor: ``G^T S^-1 = B^T L^-1`` with
+        ``B = L^-1 G``.
         """
         if self.metric != "cloud" or not rows.any():
             return super()._sample(x_pred, y, rows, dt)
         centres, D = shrink(x_pred, self._weights, self.kernel_bandwidth)
         if dt > 0.0:
-            D = D + self.model.process_noise(dt, self._pending_t)
+            D += self.model.process_noise(dt, self._pending_t)
         C = cholesky_or_none(D) if np.all(np.isfinite(D)) else None
         if C is None:  # a collapsed cloud on a noise-free model, or a runaway one: nothing to project with
             self._set_costate(None, rows, dt)
@@ -169,53 +171,57 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         n, eps = self.model.state_dim, self.regularization
         H = self.model.measurement_jacobian((centres @ self._weights)[None], self.time)[0]  # (m, n)
         r = self.model.residual(y, self.model.measure(centres.T, self.time))  # (N, m)
-        G, wr, S = self._whitened(H, r, rows, C)
-        # S >= eps I in exact arithmetic; when the prediction is beyond ~1e6 measurement sigmas, or a
-        # Jacobian overflowed, the identity is lost to rounding and there is nothing sound to project
-        if not (np.all(np.isfinite(S)) and np.trace(S) < ILL_CONDITIONED * eps):
+        whitened = self._whitened(H, r, rows, C)
+        if whitened is None:
             self._set_costate(None, rows, dt)
             return super()._sample(x_pred, y, rows, dt)
-        a_r = np.linalg.solve(S, wr)  # the co-state of every measured row, outliers included
-        costate = (a_r.T, rows, dt if dt > 0.0 else 1.0)
+        G, wr, S, L_inv = whitened
+        white_r = L_inv @ wr  # (k, N)
+        costate = ((L_inv.T @ white_r).T, rows, dt if dt > 0.0 else 1.0)  # S^-1 W r, outliers included
         used = self._gate(wr @ self._weights, S, rows)
         if not used.any():  # every component refused: a prediction
             x, correction, _ = ParticleFilter._sample(self, x_pred, y, used, dt)
             self._set_costate(*costate)
             return x, correction, used
         self._set_costate(*costate)
-        if not np.array_equal(used, rows):
-            G, wr, S = self._whitened(H, r, used, C)
-            a_r = np.linalg.solve(S, wr)
-        k = int(np.count_nonzero(used))
-        L = np.linalg.cholesky(S)
+        if used is not rows:  # a principal block of a sound S is sound
+            G, wr, S, L_inv = self._whitened(H, r, used, C)
+            white_r = L_inv @ wr
+        k = G.shape[0]
         z = self.rng.standard_normal((n, self.n_particles))
         v = self.rng.standard_normal((k, self.n_particles))
         perturbation = math.sqrt(eps) * v
         perturbation -= G @ z
-        a_u = np.linalg.solve(S, perturbation)
-        mean_shift = G.T @ a_r  # C^-1 (proposal mean - centre)
-        prior_z = z + G.T @ a_u  # C^-1 (x - proposal mean)
+        white_u = L_inv @ perturbation  # (k, N)
+        B = L_inv @ G  # (k, n)
+        mean_shift = B.T @ white_r  # C^-1 (proposal mean - centre)
+        prior_z = z + B.T @ white_u  # C^-1 (x - proposal mean)
         proposal_means = C @ mean_shift
         proposal_means += centres
         x = C @ prior_z
         x += proposal_means
         if self.moment_matching:
-            spread = C @ (np.eye(n) - G.T @ np.linalg.solve(S, G)) @ C.T  # (I - K H) D
+            E = C @ B.T  # (n, k): K W^-1 L = C G^T L^-T
+            spread = D - E @ E.T  # (I - K H) D
             self._proposal = (proposal_means, spread)
         if self.weighting == "likelihood":
             return x, 0.0, used
-        # log N(x; centre, D) - log q(x); W H (x - proposal mean) = G prior_z = sqrt(eps) v - eps a_u
+        # log N(x; centre, D) - log q(x); W H (x - proposal mean) = G prior_z = sqrt(eps) v - eps S^-1 (...)
         white = prior_z + mean_shift
-        e = v - math.sqrt(eps) * a_u
-        constant = k * math.log(eps) - 2.0 * np.log(np.diag(L)).sum()
+        e = v - math.sqrt(eps) * (L_inv.T @ white_u)
+        constant = k * math.log(eps) + 2.0 * sum(map(math.log, L_inv.diagonal().tolist()))  # - log det S
         correction = 0.5 * (np.einsum("jn,jn->n", prior_z, prior_z) - np.einsum("jn,jn->n", white, white)
                             + np.einsum("kn,kn->n", e, e) + constant)
         return x, correction, used
 
     def _whitened(self, H: np.ndarray, r: np.ndarray, rows: np.ndarray, C: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(G = W H C (k, n), W r (k, N), S = G G^T + eps I (k, k))`` of the measured ``rows`` from the
-        Jacobian ``H`` ``(m, n)`` and the innovations ``r`` ``(N, m)``."""
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+        """``(G = W H C (k, n), W r (k, N), S = G G^T + eps I (k, k), L^-1 (k, k))`` (``S = L L^T``) of the
+        measured ``rows`` from the Jacobian ``H`` ``(m, n)`` and the innovations ``r`` ``(N, m)``.
+
+        None when ``S`` is not sound to project with: ``S >= eps I`` in exact arithmetic, but when the
+        prediction is beyond ~1e6 measurement sigmas, or a Jacobian overflowed, the identity is lost to
+        rounding."""
         H, r = H[rows], (r if rows.all() else r[:, rows])
         W = self._whitener(rows)
         if W.ndim == 1:
@@ -223,19 +229,26 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         else:
             G, wr = W @ H @ C, W @ r.T
         S = G @ G.T
-        S[np.diag_indices(S.shape[0])] += self.regularization
-        return G, wr, S
+        S.flat[::S.shape[0] + 1] += self.regularization  # the diagonal
+        if not (np.all(np.isfinite(S)) and np.trace(S) < ILL_CONDITIONED * self.regularization):
+            return None
+        L = cholesky_or_none(S)
+        return None if L is None else (G, wr, S, triangular_inverse(L))
 
     def _gate(self, innovation: np.ndarray, S: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """The measured ``rows`` less the outliers: a component whose cloud-mean innovation (whitened,
         ``(k,)``) is beyond ``outlier_gate`` standard deviations of ``S`` ``(k, k)`` is left out, unless it
         has been left out ``outlier_gate_limit`` times in a row (then the filter, not the sensor, is
-        taken to be off, and the component is used until one passes the gate again)."""
+        taken to be off, and the component is used until one passes the gate again). Returns ``rows``
+        itself when no component is left out."""
         if not self.outlier_gate:
             return rows
-        index = np.flatnonzero(rows)
-        outlier = np.abs(innovation) > self.outlier_gate * np.sqrt(np.diag(S))
+        outlier = np.abs(innovation) > self.outlier_gate * np.sqrt(S.diagonal())
         streak = self._gate_streak
+        if not outlier.any():
+            streak[rows] = 0
+            return rows
+        index = np.flatnonzero(rows)
         streak[index[~outlier]] = 0
         streak[index[outlier]] += 1
         refused = index[outlier & (streak[index] <= self.outlier_gate_limit)]
@@ -259,14 +272,18 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         cov = (d * w) @ d.T + spread
         if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
             return  # a runaway proposal: leave the sampled cloud to the non-finite checks
-        self._x = match_moments(self._x, w, mean, cov)
+        matched = match_moments(self._x, w, mean, cov)
+        if matched is not None:
+            self._x = matched
         self._weighted_moments = (mean, cov)
 
     def _on_resample(self, ancestors):
         super()._on_resample(ancestors)
         if self._weighted_moments is not None:
             uniform = np.full(self.n_particles, 1.0 / self.n_particles)
-            self._x = match_moments(self._x, uniform, *self._weighted_moments)
+            matched = match_moments(self._x, uniform, *self._weighted_moments)
+            if matched is not None:
+                self._x = matched
         self._weighted_moments = None
 
     def _propose(self, x_pred, y, rows, dt, inverse_factor, z):

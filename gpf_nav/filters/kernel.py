@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from gpf_nav.linalg import cholesky_or_none, triangular_inverse
+
 
 def optimal_bandwidth(n_particles: int, dim: int) -> float:
     """Gaussian-optimal kernel bandwidth ``h`` for ``n_particles`` points in ``dim`` dimensions."""
@@ -38,19 +40,20 @@ def shrink(x: np.ndarray, weights: np.ndarray, bandwidth: float) -> tuple[np.nda
     return centres, bandwidth ** 2 * 0.5 * (cov + cov.T)
 
 
-def match_moments(x: np.ndarray, weights: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> np.ndarray:
+def match_moments(x: np.ndarray, weights: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> np.ndarray | None:
     """The cloud ``x`` ``(n, N)`` moved by an affine map so that its weighted mean and covariance are
-    ``mean`` ``(n,)`` and ``cov`` ``(n, n)`` exactly: ``mean + L_cov L_x^-1 (x - m_x)``. Unchanged when the
-    cloud's covariance is singular (nothing to map from) or ``cov`` is not positive definite."""
+    ``mean`` ``(n,)`` and ``cov`` ``(n, n)`` exactly: ``mean + L_cov L_x^-1 (x - m_x)``. None when the
+    cloud's covariance is singular (nothing to map from) or ``cov`` is not positive definite.
+
+    The map of ``T x + b``, for ``T`` lower triangular with a positive diagonal (such as this map), is
+    the map of ``x`` (the Cholesky factor of ``T P T^T`` is ``T L_P``): mapping a cloud, resampling it
+    and mapping the copies moves them where mapping the resampled copies once does."""
     _, d, current = weighted_moments(x, weights)
     if not np.all(np.isfinite(current)):
-        return x
-    try:
-        source = np.linalg.cholesky(0.5 * (current + current.T))
-        target = np.linalg.cholesky(0.5 * (cov + cov.T))
-    except np.linalg.LinAlgError:
-        return x
-    transform = target @ np.linalg.inv(source)
-    out = transform @ d
+        return None
+    source, target = cholesky_or_none(current), cholesky_or_none(cov)
+    if source is None or target is None:
+        return None
+    out = (target @ triangular_inverse(source)) @ d
     out += mean[:, None]
     return out

@@ -125,8 +125,10 @@ class ParticleFilter(Filter):
         still pending from a ``predict`` is added on top; nothing changes when either covariance is
         singular."""
         self._require_initialized()
-        self._x = match_moments(self._x, self._weights, np.asarray(mean, dtype=float),
+        matched = match_moments(self._x, self._weights, np.asarray(mean, dtype=float),
                                 np.asarray(cov, dtype=float))
+        if matched is not None:
+            self._x = matched
 
     @property
     def normalized_ess(self) -> float:
