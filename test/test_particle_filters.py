@@ -215,3 +215,43 @@ def test_set_moments_with_a_singular_target_leaves_the_cloud_alone():
     before = f.particles.copy()
     f.set_moments(np.zeros(2), np.zeros((2, 2)))
     np.testing.assert_array_equal(f.particles, before)
+
+
+def test_match_moments_of_a_lower_triangular_image_is_the_map_of_the_original():
+    """The GPF maps a resampled cloud once instead of mapping, resampling and mapping again; that rests
+    on match_moments(T x + b) == match_moments(x) for T lower triangular with a positive diagonal."""
+    from gpf_nav.filters.kernel import match_moments
+
+    rng = np.random.default_rng(4)
+    x = rng.standard_normal((4, 200)) * [[3.0], [1.0], [0.5], [2.0]]
+    w = rng.random(200)
+    w /= w.sum()
+    T = np.tril(rng.standard_normal((4, 4)))
+    np.fill_diagonal(T, rng.random(4) + 0.5)
+    mean, cov = rng.standard_normal(4), np.diag([4.0, 1.0, 2.0, 0.5]) + 0.1
+    direct = match_moments(x, w, mean, cov)
+    assert np.allclose(match_moments(T @ x + 7.0, w, mean, cov), direct, rtol=0, atol=1e-10)
+    moved_mean = direct @ w
+    moved = direct - moved_mean[:, None]
+    assert np.allclose(moved_mean, mean, atol=1e-12)
+    assert np.allclose((moved * w) @ moved.T, cov, atol=1e-12)
+    assert match_moments(x[:, :3], np.full(3, 1 / 3), mean, cov) is None  # a singular cloud: no map
+
+
+def test_default_gpf_resampled_cloud_has_the_moments_of_the_weighted_one():
+    """One update, resampling always (tau = 1) or never: both clouds carry the moments of the mixture of
+    proposals, the resampled one with uniform weights."""
+    model = constant_velocity_model()
+    ys = simulate(model, PRIOR_MEAN, 1, DT, seed=5)
+    clouds = []
+    for tau in (1e-9, 1.0):
+        f = GeometricProjectionPF(model, n_particles=300, seed=2, ess_threshold=tau, **NO_COMPENSATION)
+        f.initialize(PRIOR_MEAN, PRIOR_COV)
+        f.predict(DT)
+        f.update(ys[0])
+        clouds.append(f)
+    kept, resampled = clouds
+    assert resampled.resampled and not kept.resampled
+    assert np.allclose(resampled.weights, 1 / 300)
+    assert np.allclose(resampled.mean, kept.mean, rtol=0, atol=1e-12)
+    assert np.allclose(resampled.covariance, kept.covariance, rtol=1e-12, atol=0)

@@ -38,7 +38,7 @@ import numpy as np
 
 from gpf_nav.filters.compensated import (UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME,
                                          ModelErrorCompensated)
-from gpf_nav.filters.kernel import match_moments, optimal_bandwidth, shrink
+from gpf_nav.filters.kernel import match_moments, optimal_bandwidth, shrink, weighted_moments
 from gpf_nav.filters.particle import ParticleFilter, gaussian_shift_correction, select_rows
 from gpf_nav.filters.projection import project
 from gpf_nav.linalg import cholesky_or_none, triangular_inverse
@@ -133,7 +133,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         self._previous_y = np.full(model.measurement_dim, np.nan)
         self._input = None
         self._proposal = None
-        self._weighted_moments = None
+        self._moment_target = None
         self.moment_matching = bool(moment_matching)
         self.outlier_gate = float(outlier_gate)
         self.outlier_gate_limit = int(outlier_gate_limit)
@@ -259,32 +259,41 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         used[refused] = False
         return used
 
-    def _after_weighting(self):
+    def _after_weighting(self, resampling):
         """Cloud metric: replace the sampling noise of the weighted mean and covariance by their exact
-        values for the mixture of proposals ``sum_i w_i N(mu_i, Sigma)``."""
+        values for the mixture of proposals ``sum_i w_i N(mu_i, Sigma)``. When the cloud is about to be
+        resampled, :meth:`_on_resample` moves the resampled cloud instead: one map where two would land
+        in the same place (:func:`match_moments`)."""
         if self._proposal is None:
             return
         mu, spread = self._proposal
         self._proposal = None
-        w = self._weights
-        mean = mu @ w
-        d = mu - mean[:, None]
-        cov = (d * w) @ d.T + spread
+        mean, _, cov = weighted_moments(mu, self._weights)
+        cov += spread
         if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
             return  # a runaway proposal: leave the sampled cloud to the non-finite checks
-        matched = match_moments(self._x, w, mean, cov)
+        if resampling:
+            self._moment_target = (self._x, mean, cov)
+            return
+        matched = match_moments(self._x, self._weights, mean, cov)
         if matched is not None:
             self._x = matched
-        self._weighted_moments = (mean, cov)
 
     def _on_resample(self, ancestors):
+        """The resampled cloud gets the weighted moments of the mixture back; when it has too few
+        distinct particles to be mapped, it is resampled from the mapped weighted cloud instead."""
         super()._on_resample(ancestors)
-        if self._weighted_moments is not None:
-            uniform = np.full(self.n_particles, 1.0 / self.n_particles)
-            matched = match_moments(self._x, uniform, *self._weighted_moments)
-            if matched is not None:
-                self._x = matched
-        self._weighted_moments = None
+        if self._moment_target is None:
+            return
+        weighted, mean, cov = self._moment_target
+        self._moment_target = None
+        uniform = np.full(self.n_particles, 1.0 / self.n_particles)
+        matched = match_moments(self._x, uniform, mean, cov)
+        if matched is None:
+            matched = match_moments(weighted, self._weights, mean, cov)
+            matched = None if matched is None else matched[:, ancestors]
+        if matched is not None:
+            self._x = matched
 
     def _propose(self, x_pred, y, rows, dt, inverse_factor, z):
         if self.metric == "cloud":  # a fallback of the cloud proposal: the prior transition this time

@@ -347,9 +347,10 @@ class ParticleFilter(Filter):
         if total is None:
             return False
         self.log_likelihood = total  # previous log-weights are normalised
-        self._after_weighting()
         self.ess = resamplers.effective_sample_size(self._weights) / self.n_particles
-        if self.ess < self.ess_threshold:
+        resampling = self.ess < self.ess_threshold
+        self._after_weighting(resampling)
+        if resampling:
             ancestors = self._resample(self._weights, self.rng)
             self._x = np.ascontiguousarray(self._x[:, ancestors])
             self._on_resample(ancestors)
@@ -358,8 +359,9 @@ class ParticleFilter(Filter):
             self.resample_count += 1
         return True
 
-    def _after_weighting(self) -> None:
-        """Hook run once the new weights are set, before the ESS check and resampling."""
+    def _after_weighting(self, resampling: bool) -> None:
+        """Hook run once the new weights are set, before any resampling (``resampling`` says whether
+        the cloud is about to be resampled)."""
 
     def _on_resample(self, ancestors: np.ndarray) -> None:
         """Per-particle quantities follow their ancestors."""
