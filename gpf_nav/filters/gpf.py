@@ -164,7 +164,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         centres, D = shrink(x_pred, self._weights, self.kernel_bandwidth)
         if dt > 0.0:
             D += self.model.process_noise(dt, self._pending_t)
-        C = cholesky_or_none(D) if np.all(np.isfinite(D)) else None
+        C = cholesky_or_none(D) if np.isfinite(D).all() else None
         if C is None:  # a collapsed cloud on a noise-free model, or a runaway one: nothing to project with
             self._set_costate(None, rows, dt)
             return super()._sample(x_pred, y, rows, dt)
@@ -188,8 +188,8 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
             G, wr, S, L_inv = self._whitened(H, r, used, C)
             white_r = L_inv @ wr
         k = G.shape[0]
-        z = self.rng.standard_normal((n, self.n_particles))
-        v = self.rng.standard_normal((k, self.n_particles))
+        normals = self.rng.standard_normal((n + k, self.n_particles))  # the numbers of drawing z, then v
+        z, v = normals[:n], normals[n:]
         perturbation = math.sqrt(eps) * v
         perturbation -= G @ z
         white_u = L_inv @ perturbation  # (k, N)
@@ -206,12 +206,15 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
             self._proposal = (proposal_means, spread)
         if self.weighting == "likelihood":
             return x, 0.0, used
-        # log N(x; centre, D) - log q(x); W H (x - proposal mean) = G prior_z = sqrt(eps) v - eps S^-1 (...)
-        white = prior_z + mean_shift
+        # log N(x; centre, D) - log q(x), with C^-1 (x - centre) = prior_z + mean_shift and
+        # W H (x - proposal mean) = G prior_z = sqrt(eps) e, e = v - sqrt(eps) S^-1 perturbation;
+        # |prior_z|^2 - |prior_z + mean_shift|^2 = -mean_shift . (2 prior_z + mean_shift)
         e = v - math.sqrt(eps) * (L_inv.T @ white_u)
         constant = k * math.log(eps) + 2.0 * sum(map(math.log, L_inv.diagonal().tolist()))  # - log det S
-        correction = 0.5 * (np.einsum("jn,jn->n", prior_z, prior_z) - np.einsum("jn,jn->n", white, white)
-                            + np.einsum("kn,kn->n", e, e) + constant)
+        correction = np.einsum("kn,kn->n", e, e)
+        correction -= np.einsum("jn,jn->n", mean_shift, 2.0 * prior_z + mean_shift)
+        correction += constant
+        correction *= 0.5
         return x, correction, used
 
     def _whitened(self, H: np.ndarray, r: np.ndarray, rows: np.ndarray, C: np.ndarray
@@ -222,7 +225,8 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         None when ``S`` is not sound to project with: ``S >= eps I`` in exact arithmetic, but when the
         prediction is beyond ~1e6 measurement sigmas, or a Jacobian overflowed, the identity is lost to
         rounding."""
-        H, r = H[rows], (r if rows.all() else r[:, rows])
+        if not rows.all():
+            H, r = H[rows], r[:, rows]
         W = self._whitener(rows)
         if W.ndim == 1:
             G, wr = (H * W[:, None]) @ C, r.T * W[:, None]
@@ -230,7 +234,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
             G, wr = W @ H @ C, W @ r.T
         S = G @ G.T
         S.flat[::S.shape[0] + 1] += self.regularization  # the diagonal
-        if not (np.all(np.isfinite(S)) and np.trace(S) < ILL_CONDITIONED * self.regularization):
+        if not (np.isfinite(S).all() and S.trace() < ILL_CONDITIONED * self.regularization):
             return None
         L = cholesky_or_none(S)
         return None if L is None else (G, wr, S, triangular_inverse(L))
@@ -270,7 +274,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         self._proposal = None
         mean, _, cov = weighted_moments(mu, self._weights)
         cov += spread
-        if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
+        if not (np.isfinite(mean).all() and np.isfinite(cov).all()):
             return  # a runaway proposal: leave the sampled cloud to the non-finite checks
         if resampling:
             self._moment_target = (self._x, mean, cov)

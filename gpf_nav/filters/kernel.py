@@ -49,7 +49,7 @@ def match_moments(x: np.ndarray, weights: np.ndarray, mean: np.ndarray, cov: np.
     the map of ``x`` (the Cholesky factor of ``T P T^T`` is ``T L_P``): mapping a cloud, resampling it
     and mapping the copies moves them where mapping the resampled copies once does."""
     _, d, current = weighted_moments(x, weights)
-    if not np.all(np.isfinite(current)):
+    if not np.isfinite(current).all():
         return None
     source, target = cholesky_or_none(current), cholesky_or_none(cov)
     if source is None or target is None:
