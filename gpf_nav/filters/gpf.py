@@ -156,8 +156,10 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         In whitened coordinates (``x = centre + C w``, ``D = C C^T``; ``W R W^T = I``; ``G = W H C``;
         ``S = G G^T + eps I``): ``w = z + G^T S^-1 (W r + sqrt(eps) v - G z)`` with ``z``, ``v`` standard
         normal is an exact draw of ``q = N(centre + K r, (I - K H) D)``, ``K = C G^T S^-1 W``. Every solve
-        with ``S`` goes through the inverse ``L^-1`` of its Cholesky factor: ``G^T S^-1 = B^T L^-1`` with
-        ``B = L^-1 G``.
+        with ``S`` goes through the inverse ``L^-1`` of its Cholesky factor (``S = L L^T``): with
+        ``B = L^-1 G`` and ``E = C B^T`` ``(n, k)``, ``K = E L^-1 W`` and
+        ``x = centre + E L^-1 W r + C z + E L^-1 (sqrt(eps) v - G z)``, products of ``k`` rows where the
+        whitened form has ``n``.
         """
         if self.metric != "cloud" or not rows.any():
             return super()._sample(x_pred, y, rows, dt)
@@ -190,29 +192,30 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         k = G.shape[0]
         normals = self.rng.standard_normal((n + k, self.n_particles))  # the numbers of drawing z, then v
         z, v = normals[:n], normals[n:]
+        Gz = G @ z
         perturbation = math.sqrt(eps) * v
-        perturbation -= G @ z
+        perturbation -= Gz
         white_u = L_inv @ perturbation  # (k, N)
         B = L_inv @ G  # (k, n)
-        mean_shift = B.T @ white_r  # C^-1 (proposal mean - centre)
-        prior_z = z + B.T @ white_u  # C^-1 (x - proposal mean)
-        proposal_means = C @ mean_shift
+        E = C @ B.T  # (n, k): C G^T S^-1 = E L^-1
+        proposal_means = E @ white_r
         proposal_means += centres
-        x = C @ prior_z
+        x = C @ z
         x += proposal_means
+        x += E @ white_u
         if self.moment_matching:
-            E = C @ B.T  # (n, k): K W^-1 L = C G^T L^-T
-            spread = D - E @ E.T  # (I - K H) D
-            self._proposal = (proposal_means, spread)
+            self._proposal = (proposal_means, D - E @ E.T)  # the spread (I - K H) D
         if self.weighting == "likelihood":
             return x, 0.0, used
-        # log N(x; centre, D) - log q(x), with C^-1 (x - centre) = prior_z + mean_shift and
-        # W H (x - proposal mean) = G prior_z = sqrt(eps) e, e = v - sqrt(eps) S^-1 perturbation;
-        # |prior_z|^2 - |prior_z + mean_shift|^2 = -mean_shift . (2 prior_z + mean_shift)
+        # log N(x; centre, D) - log q(x) = (|p|^2 - |p + m|^2 + |e|^2 + constant) / 2 with the whitened
+        # p = C^-1 (x - proposal mean) = z + B^T white_u and m = C^-1 (proposal mean - centre) = B^T white_r,
+        # so |p|^2 - |p + m|^2 = -white_r . (2 B z + B B^T (2 white_u + white_r)); W H (x - proposal mean)
+        # = G p = sqrt(eps) e with e = v - sqrt(eps) S^-1 perturbation
         e = v - math.sqrt(eps) * (L_inv.T @ white_u)
         constant = k * math.log(eps) + 2.0 * sum(map(math.log, L_inv.diagonal().tolist()))  # - log det S
         correction = np.einsum("kn,kn->n", e, e)
-        correction -= np.einsum("jn,jn->n", mean_shift, 2.0 * prior_z + mean_shift)
+        cross = 2.0 * (L_inv @ Gz) + (B @ B.T) @ (2.0 * white_u + white_r)  # (k, N)
+        correction -= np.einsum("kn,kn->n", white_r, cross)
         correction += constant
         correction *= 0.5
         return x, correction, used
