@@ -190,6 +190,21 @@ def test_default_gpf_gates_an_outlier_but_its_costate_still_shows_it():
     assert faulty.costate_measured.all()
 
 
+def test_default_gpf_uses_a_component_refused_outlier_gate_limit_times_in_a_row():
+    """A range that stays 3 km off is refused outlier_gate_limit times, then used (the filter, not the
+    sensor, is taken to be off); a good range resets the count."""
+    f = GeometricProjectionPF(LunarDescentModel(), n_particles=300, seed=7, outlier_gate_limit=3)
+    run_lunar(f, steps=30)
+    gated = []
+    for step in range(6):
+        f.predict(2.0)
+        y = LunarDescentModel().measure((f.particles[:, :6].T @ f.weights)[None])[0]
+        y[0] += 0.0 if step == 4 else 3000.0
+        f.update(y)
+        gated.append(f.gated)
+    assert gated == [1, 2, 3, 3, 3, 4]
+
+
 def test_default_gpf_keeps_the_kalman_covariance_on_a_near_deterministic_model():
     """With process noise 1e-4 of the measurement noise the cloud is never renewed by the dynamics;
     kernel smoothing and moment matching keep it on the Kalman posterior over 300 steps."""

@@ -255,13 +255,14 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         if not outlier.any():
             streak[rows] = 0
             return rows
-        index = np.flatnonzero(rows)
-        streak[index[~outlier]] = 0
-        streak[index[outlier]] += 1
-        refused = index[outlier & (streak[index] <= self.outlier_gate_limit)]
-        if refused.size == 0:
+        refused = []
+        for i, is_outlier in zip(np.flatnonzero(rows).tolist(), outlier.tolist()):  # a few components
+            streak[i] = streak[i] + 1 if is_outlier else 0
+            if is_outlier and streak[i] <= self.outlier_gate_limit:
+                refused.append(i)
+        if not refused:
             return rows
-        self.gated += refused.size
+        self.gated += len(refused)
         used = rows.copy()
         used[refused] = False
         return used
@@ -277,7 +278,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         self._proposal = None
         mean, _, cov = weighted_moments(mu, self._weights)
         cov += spread
-        if not (np.isfinite(mean).all() and np.isfinite(cov).all()):
+        if not np.isfinite(cov).all():  # (a non-finite mean makes the covariance non-finite)
             return  # a runaway proposal: leave the sampled cloud to the non-finite checks
         if resampling:
             self._moment_target = (self._x, mean, cov)
