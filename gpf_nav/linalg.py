@@ -27,7 +27,7 @@ def psd_sqrt(cov: np.ndarray) -> np.ndarray:
 
 def cholesky_or_none(cov: np.ndarray) -> np.ndarray | None:
     """Lower Cholesky factor of a symmetric ``(n, n)`` matrix (of its symmetric part), or None when it is
-    not positive definite. A non-finite entry gives a non-finite factor, not None."""
+    not positive definite. Check finiteness first: a non-finite entry may give a non-finite factor."""
     factor, info = dpotrf(0.5 * (cov + cov.T), lower=1, clean=1)
     return factor if info == 0 else None
 

@@ -186,7 +186,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
             self._set_costate(*costate)
             return x, correction, used
         self._set_costate(*costate)
-        if used is not rows:  # a principal block of a sound S is sound
+        if used is not rows:  # outliers left out (a principal block of a sound S is sound)
             G, wr, S, L_inv = self._whitened(H, r, used, C)
             white_r = L_inv @ wr
         k = G.shape[0]

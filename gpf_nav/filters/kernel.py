@@ -40,7 +40,8 @@ def shrink(x: np.ndarray, weights: np.ndarray, bandwidth: float) -> tuple[np.nda
     return centres, bandwidth ** 2 * 0.5 * (cov + cov.T)
 
 
-def match_moments(x: np.ndarray, weights: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> np.ndarray | None:
+def match_moments(x: np.ndarray, weights: np.ndarray, mean: np.ndarray,
+                  cov: np.ndarray) -> np.ndarray | None:
     """The cloud ``x`` ``(n, N)`` moved by an affine map so that its weighted mean and covariance are
     ``mean`` ``(n,)`` and ``cov`` ``(n, n)`` exactly: ``mean + L_cov L_x^-1 (x - m_x)``. None when the
     cloud's covariance is singular (nothing to map from) or ``cov`` is not positive definite.
