@@ -157,9 +157,8 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         ``S = G G^T + eps I``): ``w = z + G^T S^-1 (W r + sqrt(eps) v - G z)`` with ``z``, ``v`` standard
         normal is an exact draw of ``q = N(centre + K r, (I - K H) D)``, ``K = C G^T S^-1 W``. Every solve
         with ``S`` goes through the inverse ``L^-1`` of its Cholesky factor (``S = L L^T``): with
-        ``B = L^-1 G`` and ``E = C B^T`` ``(n, k)``, ``K = E L^-1 W`` and
-        ``x = centre + E L^-1 W r + C z + E L^-1 (sqrt(eps) v - G z)``, products of ``k`` rows where the
-        whitened form has ``n``.
+        ``B = L^-1 G`` and ``E = C B^T`` ``(n, k)``, ``K = E L^-1 W`` and the draw is one product,
+        ``x = centre + E L^-1 W r + A [z; v]`` with ``A = [C - E B, sqrt(eps) E L^-1]`` ``(n, n + k)``.
         """
         if self.metric != "cloud" or not rows.any():
             return super()._sample(x_pred, y, rows, dt)
@@ -190,33 +189,27 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
             G, wr, S, L_inv = self._whitened(H, r, used, C)
             white_r = L_inv @ wr
         k = G.shape[0]
-        normals = self.rng.standard_normal((n + k, self.n_particles))  # the numbers of drawing z, then v
-        z, v = normals[:n], normals[n:]
-        Gz = G @ z
-        perturbation = math.sqrt(eps) * v
-        perturbation -= Gz
-        white_u = L_inv @ perturbation  # (k, N)
+        normals = self.rng.standard_normal((n + k, self.n_particles))  # [z; v] (drawn z, then v)
         B = L_inv @ G  # (k, n)
-        E = C @ B.T  # (n, k): C G^T S^-1 = E L^-1
+        E = C @ B.T  # (n, k): K = E L^-1 W
         proposal_means = E @ white_r
         proposal_means += centres
-        x = C @ z
+        x = np.hstack((C - E @ B, math.sqrt(eps) * (E @ L_inv))) @ normals  # A [z; v]
         x += proposal_means
-        x += E @ white_u
         if self.moment_matching:
-            self._proposal = (proposal_means, D - E @ E.T)  # the spread (I - K H) D
+            self._proposal = (proposal_means, D - E @ E.T)  # the spread (I - K H) D = A A^T
         if self.weighting == "likelihood":
             return x, 0.0, used
         # log N(x; centre, D) - log q(x) = (|p|^2 - |p + m|^2 + |e|^2 + constant) / 2 with the whitened
-        # p = C^-1 (x - proposal mean) = z + B^T white_u and m = C^-1 (proposal mean - centre) = B^T white_r,
-        # so |p|^2 - |p + m|^2 = -white_r . (2 B z + B B^T (2 white_u + white_r)); W H (x - proposal mean)
-        # = G p = sqrt(eps) e with e = v - sqrt(eps) S^-1 perturbation
-        e = v - math.sqrt(eps) * (L_inv.T @ white_u)
-        constant = k * math.log(eps) + 2.0 * sum(map(math.log, L_inv.diagonal().tolist()))  # - log det S
+        # p = C^-1 (x - proposal mean) and m = C^-1 (proposal mean - centre) = B^T L^-1 W r, and
+        # sqrt(eps) e = W H (x - proposal mean) = G p, e = [sqrt(eps) L^-T B, I - eps S^-1] [z; v];
+        # |p|^2 - |p + m|^2 = -L^-1 W r . (2 B p + B B^T L^-1 W r) with B p = sqrt(eps) L^-1 e
+        e = np.hstack((math.sqrt(eps) * (L_inv.T @ B), np.eye(k) - eps * (L_inv.T @ L_inv))) @ normals
+        cross = (2.0 * math.sqrt(eps) * L_inv) @ e
+        cross += (B @ B.T) @ white_r
         correction = np.einsum("kn,kn->n", e, e)
-        cross = 2.0 * (L_inv @ Gz) + (B @ B.T) @ (2.0 * white_u + white_r)  # (k, N)
         correction -= np.einsum("kn,kn->n", white_r, cross)
-        correction += constant
+        correction += k * math.log(eps) + 2.0 * sum(map(math.log, L_inv.diagonal().tolist()))  # - log det S
         correction *= 0.5
         return x, correction, used
 
