@@ -123,11 +123,13 @@ class ModelErrorCompensation(StateSpaceModel):
         out[:, self.acceleration_of] += a * G[self.acceleration_of[0], 0]
         if self._integrated_into is not None:
             out[:, self._integrated_into] += a * G[self._integrated_into[0], 0]
-        turn = self._turn(xb, out[:, :self._n])
-        if turn is None:
+        frames = self._frames(xb, out[:, :self._n])
+        if frames is None:
             np.multiply(a, decay, out=out[:, self._n:])
-        else:
-            np.einsum("nij,nj->ni", turn, a * decay, out=out[:, self._n:])
+        else:  # a turned with the frame, end start^T a, without forming the product of the frames
+            start, end = frames
+            local = np.einsum("nij,ni->nj", start, a * decay)
+            np.einsum("nij,nj->ni", end, local, out=out[:, self._n:])
         return out
 
     def transition_jacobian(self, x, dt, t=0.0, u=None):
@@ -140,15 +142,19 @@ class ModelErrorCompensation(StateSpaceModel):
         J[:, self._n:, self._n:] = decay * (np.eye(self._p) if turn is None else turn)
         return J
 
-    def _turn(self, before: np.ndarray, after: np.ndarray) -> np.ndarray | None:
-        """Rotation ``(N, p, p)`` carrying a vector fixed in the base model's local frame from the states
-        ``before`` to ``after`` ``(N, n)``, or None without a local frame."""
+    def _frames(self, before: np.ndarray, after: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """The base model's local frames ``(N, p, p)`` at the states ``before`` and ``after`` ``(N, n)``,
+        or None without a local frame."""
         if not self._framed:
             return None
         start, end = self.base.compensation_frame(before), self.base.compensation_frame(after)
-        if start is None or end is None:
-            return None
-        return np.einsum("nik,njk->nij", end, start)
+        return None if start is None or end is None else (start, end)
+
+    def _turn(self, before: np.ndarray, after: np.ndarray) -> np.ndarray | None:
+        """Rotation ``(N, p, p)`` carrying a vector fixed in the base model's local frame from the states
+        ``before`` to ``after`` ``(N, n)``, or None without a local frame."""
+        frames = self._frames(before, after)
+        return None if frames is None else np.einsum("nik,njk->nij", frames[1], frames[0])
 
     @property
     def time_varying_noise(self) -> bool:

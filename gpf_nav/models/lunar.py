@@ -128,21 +128,26 @@ class LunarDescentModel(StateSpaceModel):
         ``x`` ``(N, 6)``: the frame of orbit determination's empirical accelerations, in which gravity-field
         errors (radial), drag and thrust (along-track) keep their direction. Where the orbit plane is
         undefined (``r`` parallel to ``v``) the cross-track axis is any one normal to ``r``; at the
-        Moon's centre, or for a non-finite ``x``, the frame is the world's."""
-        r, v = x[:, :3], x[:, 3:6]
-        radial = r / np.maximum(np.linalg.norm(r, axis=1), _MIN_RANGE)[:, None]
-        normal = np.cross(radial, v)
-        size = np.linalg.norm(normal, axis=1)
-        flat = ~(size > 1e-12 * np.maximum(np.linalg.norm(v, axis=1), 1.0))
-        if np.any(flat):  # any axis normal to r: the cross product with the least-aligned base axis
-            base = np.eye(3)[np.argmin(np.abs(radial[flat]), axis=1)]
-            normal[flat] = np.cross(radial[flat], base)
-            size[flat] = np.linalg.norm(normal[flat], axis=1)
+        Moon's centre, or for a non-finite ``x``, the frame is the world's. Built particle-last (rows of
+        ``N``) and returned as the ``(N, 3, 3)`` view."""
+        xt = x.T
+        r, v = xt[:3], xt[3:6]
+        radial = r / np.maximum(np.sqrt(np.einsum("in,in->n", r, r)), _MIN_RANGE)
+        normal = _cross(radial, v)
+        size = np.sqrt(np.einsum("in,in->n", normal, normal))
+        flat = ~(size > 1e-12 * np.maximum(np.sqrt(np.einsum("in,in->n", v, v)), 1.0))
+        if flat.any():  # any axis normal to r: the cross product with the least-aligned base axis
+            base = np.eye(3)[:, np.argmin(np.abs(radial[:, flat]), axis=0)]
+            normal[:, flat] = _cross(radial[:, flat], base)
+            size[flat] = np.sqrt(np.einsum("in,in->n", normal[:, flat], normal[:, flat]))
         with np.errstate(invalid="ignore", divide="ignore"):  # r = 0: no frame, replaced below
-            normal /= size[:, None]
-        frame = np.stack([radial, np.cross(normal, radial), normal], axis=2)
-        frame[~np.isfinite(frame).all(axis=(1, 2))] = np.eye(3)  # at the Moon's centre, or a non-finite x
-        return frame
+            normal /= size
+        frame = np.empty((3, 3, x.shape[0]))  # (component, axis, particle)
+        frame[:, 0], frame[:, 1], frame[:, 2] = radial, _cross(normal, radial), normal
+        bad = ~np.isfinite(frame).all(axis=(0, 1))
+        if bad.any():  # at the Moon's centre, or a non-finite x
+            frame[:, :, bad] = np.eye(3)[:, :, None]
+        return frame.transpose(2, 0, 1)
 
     def process_noise(self, dt):
         q = self.accel_noise_density ** 2
@@ -198,3 +203,8 @@ def _as_input(u):
         return None
     u = np.asarray(u, dtype=float)
     return None if not np.any(u) else u
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross products ``(3, N)`` of the columns of ``a`` and ``b`` ``(3, N)``."""
+    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
