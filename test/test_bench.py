@@ -30,3 +30,22 @@ def test_retain_freed_memory_applies_on_glibc():
     assert allocator.retain_freed_memory() is True
     assert allocator.retained
     assert np.ones((4, 10_000_000 // 4)).sum() == 10_000_000  # the heap still works with big blocks
+
+
+def test_bench_steps_follow_the_measurements_in_order():
+    """Each timed step takes the next measurement (none twice), so the filter tracks the truth: no
+    measurement is gated as an outlier, as it would be if the sequence restarted."""
+    from dataclasses import replace
+
+    from gpf_nav.filters import GeometricProjectionPF
+    from gpf_nav.scenario import ScenarioConfig, filter_model, generate
+
+    config = replace(ScenarioConfig(), duration=2.0 * (bench.WARMUP + 2 * 10 + 1))
+    scenario, model = generate(config, 0), filter_model(config)
+    made = []
+    bench.time_filter(lambda m, seed: made.append(GeometricProjectionPF(m, 200, seed=seed)) or made[-1],
+                      scenario, model, steps=10, repeats=2)
+    assert made[0].gated == 0 and made[0].time == pytest.approx(2.0 * (bench.WARMUP + 20))
+    with pytest.raises(ValueError, match="measurements"):
+        bench.time_filter(lambda m, seed: GeometricProjectionPF(m, 200, seed=seed), scenario, model,
+                          steps=10, repeats=3)
