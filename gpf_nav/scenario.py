@@ -64,6 +64,9 @@ class ScenarioConfig:
         thrust_known: the filters are given the thrust as the IMU's specific force (default); False
             hides it from them: an unmodelled retrograde force like drag (a model error other than
             the gravity scale).
+        disturbance: a constant acceleration ``(3,)`` in the world frame, m/s^2, added to the truth's
+            gravity and never given to the filters (nor to the IMU, like a gravity-field error): an
+            unmodelled force fixed in inertial space, which turns in the orbit frame.
     """
 
     epsilon: float = 0.09
@@ -86,6 +89,7 @@ class ScenarioConfig:
     dropout_probability: float = 0.0
     thrust: float | None = None
     thrust_known: bool = True
+    disturbance: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self):
         if self.case not in CASES:
@@ -106,6 +110,8 @@ class ScenarioConfig:
             raise ValueError("need 0 < perilune_altitude <= apolune_altitude")
         if len(self.station) != 3:
             raise ValueError("station must have three components")
+        if len(self.disturbance) != 3 or not all(math.isfinite(a) for a in self.disturbance):
+            raise ValueError("disturbance must have three finite components")
 
     @property
     def steps(self) -> int:
@@ -113,9 +119,10 @@ class ScenarioConfig:
         return int(math.floor(self.duration / self.dt + 1e-9))
 
     def to_dict(self) -> dict:
-        """Plain dict of the fields (``station`` as a list)."""
+        """Plain dict of the fields (``station`` and ``disturbance`` as lists)."""
         out = dataclasses.asdict(self)
         out["station"] = list(self.station)
+        out["disturbance"] = list(self.disturbance)
         return out
 
     @classmethod
@@ -257,7 +264,7 @@ def generate(config: ScenarioConfig, seed: int) -> Scenario:
     noise = truth_rng.standard_normal((steps, 6)) @ sqrt_q.T
     substeps = max(1, math.ceil(dt / config.truth_step - 1e-9))
     truth, force = _integrate_truth(initial_state(config), steps, dt, substeps, model.gm,
-                                    config.thrust, noise)
+                                    config.thrust, noise, config.disturbance)
     altitude = np.linalg.norm(truth[:, :3], axis=1) - MOON_RADIUS
     if altitude.min() < 0.0:
         hit = int(np.argmax(altitude < 0.0)) * dt
@@ -268,8 +275,10 @@ def generate(config: ScenarioConfig, seed: int) -> Scenario:
 
 
 def _integrate_truth(x0: np.ndarray, steps: int, dt: float, substeps: int, gm: float,
-                     thrust: float | None, noise: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """RK4 two-body flow with held specific force, plus ``noise[k]`` ``(K, 6)`` added after each step.
+                     thrust: float | None, noise: np.ndarray,
+                     disturbance=(0.0, 0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+    """RK4 two-body flow with held specific force and the constant ``disturbance`` acceleration, plus
+    ``noise[k]`` ``(K, 6)`` added after each step.
 
     Scalar Python arithmetic: a single 6-state is far faster this way than with numpy calls.
     Returns truth ``(K + 1, 6)`` and specific force ``(K, 3)``.
@@ -280,9 +289,11 @@ def _integrate_truth(x0: np.ndarray, steps: int, dt: float, substeps: int, gm: f
     truth[0] = x0
     x, y, z, vx, vy, vz = (float(c) for c in x0)
 
+    dx, dy, dz = (float(a) for a in disturbance)
+
     def acc(px, py, pz):
         k = -gm / (px * px + py * py + pz * pz) ** 1.5
-        return k * px + ux, k * py + uy, k * pz + uz
+        return k * px + ux + dx, k * py + uy + dy, k * pz + uz + dz
 
     for step in range(steps):
         ux = uy = uz = 0.0

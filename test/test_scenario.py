@@ -221,3 +221,16 @@ def test_csv_without_header_or_force(tmp_path):
     np.savetxt(bad, rows[::-1], delimiter=",")
     with pytest.raises(ValueError, match="increasing"):
         load_csv(bad)
+
+
+def test_disturbance_is_a_hidden_constant_world_frame_acceleration():
+    quiet = ScenarioConfig(duration=40.0, truth_accel_noise_density=0.0)
+    push = np.array([0.3, -0.2, 0.1])
+    a, b = generate(quiet, 1), generate(ScenarioConfig(**{**quiet.to_dict(), "disturbance": tuple(push)}), 1)
+    t = a.times[-1]
+    # over 40 s the two-body gradient acts on the 240 m offset: 1e-5 relative, far below the tolerance
+    np.testing.assert_allclose(b.truth[-1, :3] - a.truth[-1, :3], 0.5 * push * t ** 2, rtol=1e-3)
+    np.testing.assert_allclose(b.truth[-1, 3:] - a.truth[-1, 3:], push * t, rtol=1e-3)
+    assert not b.specific_force.any()  # neither the filters nor the IMU are told
+    with pytest.raises(ValueError, match="disturbance"):
+        ScenarioConfig(disturbance=(0.0, math.nan, 0.0))
