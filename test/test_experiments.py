@@ -147,7 +147,7 @@ def test_sweep_smoke(tmp_path):
         assert (tmp_path / "sweep_mismatch.png").stat().st_size > 10_000
 
 
-def test_sweep_merge_reruns_only_the_named_rows(tmp_path):
+def test_sweep_merge_reruns_only_the_named_rows(tmp_path, capsys):
     first, second = tmp_path / "first", tmp_path / "second"
     common = ["sweep", "--param", "mismatch", "--values", "0.1", "--runs", "2", "--workers", "1", "--cases",
               "full", "--no-plots", "--no-progress"] + SHORT
@@ -163,9 +163,12 @@ def test_sweep_merge_reruns_only_the_named_rows(tmp_path):
     assert rows[runner.EKF_COMPENSATED]["position_rmse_km"][0]["n"] == 2
     assert merged["meta"]["rerun"] == ["EKF", runner.EKF_COMPENSATED]
     assert merged["meta"]["earlier"] == earlier["meta"]
-    with pytest.raises(SystemExit):  # not the same sweep: 3 runs against 2
+    with pytest.raises(SystemExit):  # not the same sweep: 3 runs against 2 (refused before running)
         sweep_main = common + ["--filters", "ekf", "--out", str(second), "--merge", str(first / "sweep_mismatch.json")]
         cli.main([a if a != "2" else "3" for a in sweep_main])
+    assert "is not the same sweep" in capsys.readouterr().err
+    with pytest.raises(SystemExit):  # not a report at all
+        cli.main(common + ["--filters", "ekf", "--out", str(second), "--merge", str(tmp_path)])
 
 
 def test_cli_rejects_unknown_filter(tmp_path):

@@ -65,12 +65,7 @@ def sweep(param: str, values, config, cases, runs: int, seed: int, filters, n_pa
     results = map_tasks(run_task, tasks, workers=workers, scheduler=scheduler, progress=progress,
                         description=f"{param} sweep runs")
     report = {"schema": SCHEMA, "param": param, "field": field, "label": label, "values": values,
-              "settings": {"runs": runs, "seed": seed, "n_particles": n_particles, "filters": list(filters),
-                           "divergence_km": divergence_km,
-                           "statistics": "runs with a non-finite estimate excluded; diverged runs kept; "
-                                         "std is the sample std (ddof=1) over runs",
-                           "base_config": config.to_dict()},
-              "cases": {}}
+              "settings": settings(runs, seed, filters, n_particles, divergence_km, config), "cases": {}}
     for case in cases:
         entry = {"filters": {name: {key: [] for key in COLUMNS} for name in filters},
                  "failures": {name: [] for name in filters}, "oracle_multiplier": {}}
@@ -92,23 +87,39 @@ def sweep(param: str, values, config, cases, runs: int, seed: int, filters, n_pa
     return report
 
 
+def settings(runs: int, seed: int, filters, n_particles: int, divergence_km: float, config) -> dict:
+    """The ``settings`` of a report."""
+    return {"runs": runs, "seed": seed, "n_particles": n_particles, "filters": list(filters),
+            "divergence_km": divergence_km,
+            "statistics": "runs with a non-finite estimate excluded; diverged runs kept; "
+                          "std is the sample std (ddof=1) over runs",
+            "base_config": config.to_dict()}
+
+
 MERGE_KEYS = ("runs", "seed", "n_particles", "divergence_km")
 """Settings two reports must share for their rows to be merged (and the scenario, ``base_config``)."""
+
+
+def check_same_sweep(earlier: dict, param: str, values: list[float], cases, update_settings: dict) -> None:
+    """Raise ValueError unless rows of a sweep of ``param`` over ``values`` and ``cases`` with
+    ``update_settings`` can be merged into the report ``earlier``."""
+    def scenario(s: dict) -> ScenarioConfig:  # a field added since the earlier report has its default
+        return ScenarioConfig.from_dict(s["base_config"])
+
+    same = (earlier.get("schema") == SCHEMA and earlier.get("param") == param
+            and earlier.get("values") == [float(v) for v in values]
+            and all(earlier["settings"].get(k) == update_settings[k] for k in MERGE_KEYS)
+            and scenario(earlier["settings"]) == scenario(update_settings)
+            and set(cases) <= set(earlier["cases"]))
+    if not same:
+        raise ValueError("the report to merge into is not the same sweep (param, values, cases, runs, seed, "
+                         "particles and scenario must agree)")
 
 
 def merge(earlier: dict, update: dict) -> dict:
     """``earlier`` with the rows of ``update``'s filters replaced (or added); raises ValueError when the
     two are not the same sweep."""
-    def scenario(report: dict) -> ScenarioConfig:  # a field added since the earlier report has its default
-        return ScenarioConfig.from_dict(report["settings"]["base_config"])
-
-    same = (earlier.get("schema") == update["schema"] and earlier.get("param") == update["param"]
-            and earlier.get("values") == update["values"]
-            and all(earlier["settings"].get(k) == update["settings"][k] for k in MERGE_KEYS)
-            and scenario(earlier) == scenario(update) and set(update["cases"]) <= set(earlier["cases"]))
-    if not same:
-        raise ValueError("the report to merge into is not the same sweep (param, values, cases, runs, seed, "
-                         "particles and scenario must agree)")
+    check_same_sweep(earlier, update["param"], update["values"], update["cases"], update["settings"])
     merged = json.loads(json.dumps(earlier))
     names = update["settings"]["filters"]
     merged["settings"]["filters"] = list(dict.fromkeys(merged["settings"]["filters"] + list(names)))
@@ -183,9 +194,16 @@ def main(argv: list[str] | None = None) -> int:
     try:
         config = base_config(args)
         cases, filters = parse_cases(args.cases), parse_filters(args.filters)
-        earlier = json.loads(args.merge.read_text()) if args.merge else None
     except (ValueError, OSError) as err:
         parser.error(str(err))
+    earlier = None
+    if args.merge:  # checked before the campaign, not after it
+        try:
+            earlier = json.loads(args.merge.read_text())
+            check_same_sweep(earlier, args.param, values, cases, json.loads(json.dumps(settings(
+                args.runs, args.seed, filters, args.particles, args.divergence_km, config))))
+        except (ValueError, OSError, KeyError, TypeError, AttributeError) as err:
+            parser.error(f"--merge {args.merge}: {err}")
     commit = git_commit()  # the code this process runs; read before a long campaign
     start = time.perf_counter()
     report = sweep(args.param, values, config, cases, args.runs, args.seed, filters, args.particles,
@@ -193,10 +211,7 @@ def main(argv: list[str] | None = None) -> int:
     wall = time.perf_counter() - start
     report["meta"] = run_metadata(args, wall, ["sweep"] + argv, commit)
     if earlier is not None:
-        try:
-            report = merge(earlier, json.loads(json.dumps(report)))
-        except ValueError as err:
-            parser.error(f"--merge {args.merge}: {err}")
+        report = merge(earlier, json.loads(json.dumps(report)))
     args.out.mkdir(parents=True, exist_ok=True)
     json_path = args.out / f"sweep_{args.param}.json"
     md_path = args.out / f"sweep_{args.param}.md"
