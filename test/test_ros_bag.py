@@ -157,6 +157,19 @@ def test_record_starts_at_the_wall_clock_time_by_default(tmp_path):
     assert t_ns == reader.start_ns == conv.stamp_to_ns(deserialize(raw, Odometry).header.stamp)
 
 
+def test_record_without_clock_stamps_by_the_wall_clock_like_the_simulator(tmp_path):
+    """publish_clock false: no /clock in the bag, and start_time is ignored (the simulator's stamps then
+    follow the wall clock); every other topic is there."""
+    p = _sim_params(publish_clock=False, start_time=1000.0, **{"scenario.duration": 10.0})
+    before = time.time_ns()
+    counts = record(str(tmp_path / "wall"), p, "mcap")
+    after = time.time_ns()
+    assert "/clock" not in counts and counts["/measurements/rae"] == 5 and counts["/set_state"] == 1
+    with BagReader(tmp_path / "wall") as reader:
+        assert before <= reader.start_ns <= after
+        assert not list(reader.messages(["/clock"]))
+
+
 # --- replay --------------------------------------------------------------------------------------------
 def test_round_trip_record_replay_mcap_read_back_by_mcap_ros2_support(recorded, tmp_path):
     path, p, counts = recorded

@@ -2,8 +2,8 @@
 
 The same parameters (``config/simulator.yaml``, ``-p name:=value``), events
 (:func:`gpf_nav.ros.playback.build_events`) and messages (:func:`gpf_nav.ros.simulator_node.event_message`)
-as ``ros2 run gpf_nav simulator`` with ``publish_clock: true`` at ``rate_factor`` 1, only as fast as the
-disk allows:
+as ``ros2 run gpf_nav simulator`` at ``rate_factor`` 1, only as fast as the disk allows. With
+``publish_clock: true`` (the default):
 
 * ``/measurements/rae``, ``/imu``, ``/truth/odometry`` stamped ``start_time`` + trajectory time
   (``start_time`` negative, the default: the wall-clock time when the recording starts);
@@ -15,7 +15,9 @@ disk allows:
   ``ros2 bag play`` publishes it the same way.
 
 Play it with ``ros2 bag play OUT`` and run the subscribers with ``use_sim_time:=true`` (the bag carries
-``/clock``; do not add ``--clock``). Exit status 2, after one line on stderr, on invalid parameters or an
+``/clock``; do not add ``--clock``). With ``publish_clock: false``, as the simulator then does, there is
+no ``/clock`` and the stamps follow the wall clock from the start of the recording (``start_time`` is
+ignored): play it with ``ros2 bag play --clock`` if the subscribers use simulated time. Exit status 2, after one line on stderr, on invalid parameters or an
 existing ``OUT``.
 """
 from __future__ import annotations
@@ -73,22 +75,25 @@ def record(out: str, p: dict, storage: str = "mcap") -> dict:
     if errors:
         raise ParameterError("invalid parameters: " + "; ".join(errors))
     events = build_events(scenario, p["imu_rate"], p["imu_noise_std"], p["truth_rate"], p["seed"])
-    epoch = int(round(p["start_time"] * NS)) if p["start_time"] >= 0.0 else time.time_ns()
+    clock = p["publish_clock"]
+    epoch = int(round(p["start_time"] * NS)) if clock and p["start_time"] >= 0.0 else time.time_ns()
     span = max(e.t_ns for e in events)
     period = int(round(NS / p["clock_rate"]))
     qos = qos_profile(reliable=True, depth=QOS_DEPTH)
     topics = {absolute(topic): (msg_type, qos) for topic, msg_type in EVENT_TOPICS.values()}
-    topics[CLOCK_TOPIC] = (Clock, qos)
+    if clock:
+        topics[CLOCK_TOPIC] = (Clock, qos)
     if p["hand_over_prior"]:
         topics[absolute(HANDOVER_TOPIC)] = (Odometry, qos_profile(reliable=True, depth=1, transient_local=True))
     with BagWriter(out, storage, topics) as bag:
-        bag.write(CLOCK_TOPIC, Clock(clock=conv.ns_to_stamp(epoch)), epoch)
+        if clock:
+            bag.write(CLOCK_TOPIC, Clock(clock=conv.ns_to_stamp(epoch)), epoch)
         if p["hand_over_prior"]:
             bag.write(absolute(HANDOVER_TOPIC), handover_message(scenario, epoch, p), epoch)
         tick = period
         for event in events + [None]:
             until = span if event is None else event.t_ns
-            while tick <= until:
+            while clock and tick <= until:
                 bag.write(CLOCK_TOPIC, Clock(clock=conv.ns_to_stamp(epoch + tick)), epoch + tick)
                 tick += period
             if event is not None:
