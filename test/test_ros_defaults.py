@@ -72,9 +72,10 @@ def test_simulator_and_estimator_with_no_arguments(tmp_path):
         start("gpf_nav.ros.simulator_node", "simulator")
         assert _spin_until(executor, lambda: rae, 120.0, procs), "no measurement from the simulator"
         start("gpf_nav.ros.estimator_node", "estimator")
-        assert _spin_until(executor, lambda: node.count_publishers("odometry/filtered") > 0, 120.0, procs)
+        assert _spin_until(executor, lambda: node.count_publishers("odometry/filtered") > 0, 120.0, procs), \
+            "the estimator never advertised odometry/filtered"
         up = time.monotonic()
-        assert _spin_until(executor, lambda: odom, 120.0, procs)
+        assert _spin_until(executor, lambda: odom, 120.0, procs), "no odometry from the estimator"
         first_wall = time.monotonic() - up  # printed, not asserted: the machine may be busy
         assert _spin_until(executor, lambda: len(odom) >= 40, 120.0, procs), len(odom)
 
@@ -86,7 +87,7 @@ def test_simulator_and_estimator_with_no_arguments(tmp_path):
             return None, {}
 
         assert _spin_until(executor, lambda: status()[1].get("initialized") == "true"
-                           and int(status()[1].get("measurements accepted", 0)) >= 2, 120.0, procs)
+                           and int(status()[1].get("measurements accepted", 0)) >= 2, 120.0, procs), status()[1]
     finally:
         for proc, _ in procs:
             if proc.poll() is None:
