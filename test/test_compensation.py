@@ -3,7 +3,8 @@ the compensated filters (EKF, default GPF) against the Kalman filter of the augm
 import numpy as np
 import pytest
 
-from gpf_nav.filters import CompensatedEKF, GeometricProjectionPF
+from gpf_nav.filters import CompensatedEKF, ExtendedKF, GeometricProjectionPF
+from gpf_nav.filters.model_averaging import mixture_moments
 from gpf_nav.models import LinearGaussianModel, LunarDescentModel
 from gpf_nav.models.compensation import ModelErrorCompensation
 from linear_reference import kalman, simulate
@@ -79,16 +80,55 @@ def test_compensated_ekf_is_the_kalman_filter_of_the_augmented_model():
     mean, cov = np.array([0.0, 1.0]), np.diag([4.0, 1.0])
     ys = simulate(augmented_linear(base), np.array([0.0, 1.0, 0.2]), 30, 1.0, seed=4)
     exact_mean, exact_cov = _kalman_of_augmented(ys, 1.0, mean, cov)
-    f = CompensatedEKF(base, SIGMA, TAU)
+    f = CompensatedEKF(base, SIGMA, TAU, nominal_prior=0.0)
     f.initialize(mean, cov)
     for y in ys:
         f.predict(1.0)
         f.update(y)
+    assert f.model_probabilities is None
     np.testing.assert_allclose(f.augmented_mean, exact_mean, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(f.augmented_covariance, exact_cov, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(f.mean, exact_mean[:2], rtol=1e-9, atol=1e-9)
     assert f.unmodelled_acceleration == pytest.approx(exact_mean[2:])
     assert f.unmodelled_acceleration_covariance == pytest.approx(exact_cov[2:, 2:])
+
+
+def _evidence_and_posterior(f, ys, mean, cov):
+    """Run ``f`` from ``N(mean, cov)`` over ``ys`` (steps of 1 s): its log evidence and the filter."""
+    f.initialize(mean, cov)
+    evidence = 0.0
+    for y in ys:
+        f.predict(1.0)
+        f.update(y)
+        evidence += f.last_log_likelihood
+    return evidence, f
+
+
+@pytest.mark.parametrize("true_acceleration", [0.0, 0.05, 0.3])
+def test_model_average_is_the_exact_bayesian_average_of_nominal_and_compensated(true_acceleration):
+    """With a constant unmodelled acceleration (a correlation time of 1e12 s), the nominal model is nested
+    in the compensated one: the averaged estimate must be the two Kalman posteriors weighted by their
+    exact evidence (Savage-Dickey), whatever the truth."""
+    base, prior = constant_velocity(), 0.3
+    mean, cov = np.array([0.0, 1.0]), np.diag([4.0, 1.0])
+    truth = augmented_linear(base)
+    truth.A[2, 2], truth.G[2, 1] = 0.0, 0.0  # a constant acceleration
+    ys = simulate(truth, np.array([0.0, 1.0, true_acceleration]), 25, 1.0, seed=6)
+    nominal_evidence, nominal = _evidence_and_posterior(ExtendedKF(base), ys, mean, cov)
+    compensated_evidence, compensated = _evidence_and_posterior(CompensatedEKF(base, SIGMA, 1e12, 0.0), ys,
+                                                                mean, cov)
+    _, f = _evidence_and_posterior(CompensatedEKF(base, SIGMA, 1e12, nominal_prior=prior), ys, mean, cov)
+    odds = prior / (1.0 - prior) * np.exp(nominal_evidence - compensated_evidence)
+    expected = odds / (1.0 + odds)
+    assert f.model_probabilities == pytest.approx([expected, 1.0 - expected], rel=1e-5, abs=1e-12)
+    members = [(nominal.mean, nominal.covariance), (compensated.mean, compensated.covariance)]
+    exact_mean, exact_cov = mixture_moments((expected, 1.0 - expected), members)
+    np.testing.assert_allclose(f.mean, exact_mean, rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(f.covariance, exact_cov, rtol=1e-5, atol=1e-9)
+    a, A = compensated.augmented_mean[2:], compensated.augmented_covariance[2:, 2:]
+    assert f.unmodelled_acceleration == pytest.approx((1.0 - expected) * a, rel=1e-5, abs=1e-9)
+    assert f.unmodelled_acceleration_covariance[0, 0] == pytest.approx(
+        (1.0 - expected) * (A[0, 0] + expected * a[0] ** 2), rel=1e-5)
 
 
 def test_default_gpf_converges_to_the_kalman_posterior_of_the_augmented_model():

@@ -2,15 +2,19 @@
 
 :class:`ModelErrorCompensated` is a mixin: the filter runs on ``ModelErrorCompensation(model)`` (see
 :mod:`gpf_nav.models.compensation`) while :meth:`initialize`, :attr:`mean` and :attr:`covariance` keep
-the user's state ``(n,)``; the estimated extra acceleration and the whole augmented estimate are
-properties of their own. The GPF's default configuration uses it, and :class:`CompensatedEKF` gives an
-EKF with the same compensation (the fair baseline of the experiments).
+the user's state ``(n,)``; the estimated extra acceleration and the whole augmented (compensated)
+posterior are properties of their own. :attr:`mean` and :attr:`covariance` are the model average of the
+compensated posterior and of its nominal hypothesis, "no unmodelled acceleration"
+(:mod:`gpf_nav.filters.model_averaging`), unless ``nominal_prior`` is 0. The GPF's default
+configuration uses it, and :class:`CompensatedEKF` gives an EKF with the same compensation and the same
+average (the fair baseline of the experiments).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from gpf_nav.filters.kalman import ExtendedKF
+from gpf_nav.filters.model_averaging import NOMINAL_PRIOR, mixture_moments, model_average
 from gpf_nav.models.base import StateSpaceModel
 from gpf_nav.models.compensation import ModelErrorCompensation
 from gpf_nav.models.validation import validate_model
@@ -25,12 +29,17 @@ class ModelErrorCompensated:
     """Mixin for a :class:`~gpf_nav.filters.base.Filter` subclass (put it first in the bases)."""
 
     nominal_model: StateSpaceModel
+    nominal_prior: float
 
-    def _compensate(self, model: StateSpaceModel, acceleration_std: float,
-                    time_constant: float) -> StateSpaceModel:
+    def _compensate(self, model: StateSpaceModel, acceleration_std: float, time_constant: float,
+                    nominal_prior: float) -> StateSpaceModel:
         """The model the filter runs on: ``model`` augmented, or ``model`` itself when
-        ``acceleration_std`` is 0."""
+        ``acceleration_std`` is 0. ``nominal_prior`` in [0, 1) is the prior probability of the nominal
+        model in the estimate (0: the compensated posterior as it is)."""
+        if not 0.0 <= float(nominal_prior) < 1.0:
+            raise ValueError(f"nominal_prior must lie in [0, 1), got {nominal_prior}")
         self.nominal_model = model
+        self.nominal_prior = float(nominal_prior)
         if float(acceleration_std) == 0.0:
             return model
         return ModelErrorCompensation(model, time_constant, acceleration_std)
@@ -51,35 +60,63 @@ class ModelErrorCompensated:
             mean, cov = self.model.augment_prior(mean, np.asarray(cov, dtype=float))
         super().initialize(mean, cov, t0)
 
+    def _average(self) -> tuple[float, np.ndarray, np.ndarray]:
+        """``(probability of the nominal model, mean (n,), covariance (n, n))`` of the user's state."""
+        n = self.nominal_model.state_dim
+        mean, cov = super().mean, super().covariance
+        if not self.compensated:
+            return 0.0, mean[:n], cov[:n, :n]
+        return model_average(mean, cov, n, self.model.acceleration_std, self.nominal_prior)
+
     @property
     def mean(self) -> np.ndarray:
-        return super().mean[:self.nominal_model.state_dim]
+        """Estimate of the user's state ``(n,)``: the model average (module docstring)."""
+        return self._average()[1]
 
     @property
     def covariance(self) -> np.ndarray:
-        n = self.nominal_model.state_dim
-        return super().covariance[:n, :n]
+        """Its covariance ``(n, n)``."""
+        return self._average()[2]
+
+    @property
+    def model_probabilities(self) -> np.ndarray | None:
+        """``(2,)`` posterior probabilities of the nominal and the compensated model; None when the
+        estimate is not a model average (no compensation, or ``nominal_prior`` 0)."""
+        if not (self.compensated and self.nominal_prior > 0.0):
+            return None
+        nominal = self._average()[0]
+        return np.array([nominal, 1.0 - nominal])
 
     @property
     def augmented_mean(self) -> np.ndarray:
-        """Mean ``(n + p,)`` of the whole state (the user's state, then the unmodelled acceleration)."""
+        """Compensated posterior mean ``(n + p,)`` of the whole state (the user's state, then the
+        unmodelled acceleration)."""
         return super().mean
 
     @property
     def augmented_covariance(self) -> np.ndarray:
-        """Covariance ``(n + p, n + p)`` of the whole state."""
+        """Its covariance ``(n + p, n + p)``."""
         return super().covariance
 
     @property
     def unmodelled_acceleration(self) -> np.ndarray:
-        """Estimated unmodelled acceleration ``(p,)`` (empty without compensation)."""
-        return self.augmented_mean[self.nominal_model.state_dim:]
+        """Estimated unmodelled acceleration ``(p,)``, model-averaged (the nominal model's is zero);
+        empty without compensation."""
+        return self._acceleration_average()[0]
 
     @property
     def unmodelled_acceleration_covariance(self) -> np.ndarray:
         """Its covariance ``(p, p)``."""
+        return self._acceleration_average()[1]
+
+    def _acceleration_average(self) -> tuple[np.ndarray, np.ndarray]:
         n = self.nominal_model.state_dim
-        return self.augmented_covariance[n:, n:]
+        mean, cov = self.augmented_mean[n:], self.augmented_covariance[n:, n:]
+        probabilities = self.model_probabilities
+        if probabilities is None:
+            return mean, cov
+        zero = (np.zeros_like(mean), np.zeros_like(cov))
+        return mixture_moments(probabilities, [zero, (mean, cov)])
 
 
 class CompensatedEKF(ModelErrorCompensated, ExtendedKF):
@@ -89,11 +126,13 @@ class CompensatedEKF(ModelErrorCompensated, ExtendedKF):
         model: the state-space model.
         unmodelled_acceleration_std: stationary std of the unmodelled acceleration (0: plain EKF).
         unmodelled_acceleration_time: its correlation time, s.
+        nominal_prior: prior probability of the nominal model in the estimate (0: the compensated
+            posterior as it is).
         seed: seed of the filter's random stream.
     """
 
     def __init__(self, model: StateSpaceModel, unmodelled_acceleration_std: float = UNMODELLED_ACCELERATION_STD,
                  unmodelled_acceleration_time: float = UNMODELLED_ACCELERATION_TIME,
-                 seed: int | np.random.Generator | None = None):
-        super().__init__(self._compensate(model, unmodelled_acceleration_std, unmodelled_acceleration_time),
-                         seed)
+                 nominal_prior: float = NOMINAL_PRIOR, seed: int | np.random.Generator | None = None):
+        super().__init__(self._compensate(model, unmodelled_acceleration_std, unmodelled_acceleration_time,
+                                          nominal_prior), seed)

@@ -39,6 +39,7 @@ import numpy as np
 from gpf_nav.filters.compensated import (UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME,
                                          ModelErrorCompensated)
 from gpf_nav.filters.kernel import match_moments, optimal_bandwidth, shrink, weighted_moments
+from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
 from gpf_nav.filters.particle import ParticleFilter, gaussian_shift_correction, select_rows
 from gpf_nav.filters.projection import project
 from gpf_nav.linalg import cholesky_or_none, triangular_inverse
@@ -82,6 +83,9 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         unmodelled_acceleration_std: stationary std of the estimated unmodelled acceleration (state units
             per s^2); 0 turns the compensation off.
         unmodelled_acceleration_time: its correlation time, s.
+        nominal_prior: prior probability that the model needs no unmodelled acceleration; the estimate
+            (:attr:`mean`, :attr:`covariance`) is the model average of the two hypotheses
+            (:mod:`gpf_nav.filters.model_averaging`); 0 gives the compensated posterior as it is.
         kernel_bandwidth: ``h`` of the cloud metric's kernel in (0, 1); default the Gaussian-optimal one.
         outlier_gate: cloud metric: a measured component whose innovation is beyond this many standard
             deviations is not used (counted in :attr:`gated`; its co-state is still computed, so the
@@ -100,7 +104,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
                  weighting: str = "corrected", metric: str = "cloud", regularization: float | None = None,
                  unmodelled_acceleration_std: float = UNMODELLED_ACCELERATION_STD,
                  unmodelled_acceleration_time: float = UNMODELLED_ACCELERATION_TIME,
-                 kernel_bandwidth: float | None = None, outlier_gate: float = OUTLIER_GATE,
+                 nominal_prior: float = NOMINAL_PRIOR, kernel_bandwidth: float | None = None, outlier_gate: float = OUTLIER_GATE,
                  outlier_gate_limit: int = OUTLIER_GATE_LIMIT, moment_matching: bool = True,
                  resampling: str = "systematic",
                  ess_threshold: float = 0.5, seed: int | np.random.Generator | None = None,
@@ -122,7 +126,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         if not (outlier_gate >= 0.0 and int(outlier_gate_limit) >= 0):
             raise ValueError(f"outlier_gate and outlier_gate_limit must be >= 0, got {outlier_gate}, "
                              f"{outlier_gate_limit}")
-        model = self._compensate(model, unmodelled_acceleration_std, unmodelled_acceleration_time)
+        model = self._compensate(model, unmodelled_acceleration_std, unmodelled_acceleration_time, nominal_prior)
         super().__init__(model, n_particles, resampling, ess_threshold, seed, collapse_steps)
         self.reference = reference
         self.weighting = weighting

@@ -33,6 +33,7 @@ import math
 import numpy as np
 
 from gpf_nav.filters.gpf import GeometricProjectionPF
+from gpf_nav.filters.model_averaging import mixture_moments
 from gpf_nav.models.base import StateSpaceModel
 
 SWITCH_TIME = 2.0e5
@@ -63,11 +64,13 @@ class MultipleModelGPF:
         if options.get("unmodelled_acceleration_std", 1.0) == 0.0:
             raise ValueError("the compensated member needs unmodelled_acceleration_std > 0")
         streams = np.random.SeedSequence(np.random.default_rng(seed).integers(2 ** 63)).spawn(2)
+        if options.pop("nominal_prior", 0.0):
+            raise ValueError("the IMM tests the nominal model itself: its members take no nominal_prior")
         nominal_options = {k: v for k, v in options.items() if not k.startswith("unmodelled_acceleration")}
         self.nominal = GeometricProjectionPF(model, n_particles, unmodelled_acceleration_std=0.0,
                                              seed=np.random.default_rng(streams[0]), **nominal_options)
         self.compensated = GeometricProjectionPF(model, n_particles, seed=np.random.default_rng(streams[1]),
-                                                 **options)
+                                                 nominal_prior=0.0, **options)
         self.model = model
         self.switch_time = float(switch_time)
         self.model_probabilities = np.full(2, 0.5)
@@ -115,9 +118,9 @@ class MultipleModelGPF:
         moments = [self._nominal_augmented(), (self.compensated.augmented_mean,
                                                self.compensated.augmented_covariance)]
         n = self.model.state_dim
-        mean, cov = _mixture(weights[:, 0], moments)
+        mean, cov = mixture_moments(weights[:, 0], moments)
         self.nominal.set_moments(mean[:n], cov[:n, :n])
-        self.compensated.set_moments(*_mixture(weights[:, 1], moments))
+        self.compensated.set_moments(*mixture_moments(weights[:, 1], moments))
         self._predicted_probabilities = predicted
         self._mix_due = False
 
@@ -141,11 +144,11 @@ class MultipleModelGPF:
 
     @property
     def mean(self) -> np.ndarray:
-        return _mixture(self.model_probabilities, self._estimates())[0]
+        return mixture_moments(self.model_probabilities, self._estimates())[0]
 
     @property
     def covariance(self) -> np.ndarray:
-        return _mixture(self.model_probabilities, self._estimates())[1]
+        return mixture_moments(self.model_probabilities, self._estimates())[1]
 
     def _estimates(self) -> list[tuple[np.ndarray, np.ndarray]]:
         return [(m.mean, m.covariance) for m in self.members]
@@ -160,7 +163,7 @@ class MultipleModelGPF:
         """Its covariance ``(p, p)``."""
         a = self.compensated.unmodelled_acceleration
         zero = (np.zeros_like(a), np.zeros((a.size, a.size)))
-        return _mixture(self.model_probabilities,
+        return mixture_moments(self.model_probabilities,
                         [zero, (a, self.compensated.unmodelled_acceleration_covariance)])[1]
 
     # --- particle diagnostics, model-averaged ----------------------------------------------------------
@@ -220,10 +223,3 @@ class MultipleModelGPF:
     def last_recovery_reason(self) -> str | None:
         """Why a member last re-initialised itself, or None."""
         return self.compensated.last_recovery_reason or self.nominal.last_recovery_reason
-
-
-def _mixture(weights, moments: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
-    """Mean ``(d,)`` and covariance ``(d, d)`` of ``sum_i weights_i N(m_i, P_i)``."""
-    mean = sum(w * m for w, (m, _) in zip(weights, moments))
-    cov = sum(w * (P + np.outer(m - mean, m - mean)) for w, (m, P) in zip(weights, moments))
-    return mean, 0.5 * (cov + cov.T)

@@ -220,15 +220,23 @@ class ModelErrorCompensation(StateSpaceModel):
 @lru_cache(maxsize=32)
 def _coupling(n: int, p: int, driven: bytes, integrated: bytes | None, tau: float,
               dt: float) -> tuple[np.ndarray, float]:
-    decay = math.exp(-dt / tau)
-    velocity_gain = tau * (1.0 - decay)  # integral of exp(-s/tau) over dt
-    position_gain = tau * (dt - velocity_gain)  # its integral
+    x = dt / tau
+    velocity_gain = -tau * math.expm1(-x)  # integral of exp(-s/tau) over dt
+    position_gain = tau * tau * _integrated_decay(x)  # its integral, tau (dt - velocity_gain)
     G = np.zeros((n, p))
     G[np.frombuffer(driven, dtype=int), np.arange(p)] = velocity_gain
     if integrated is not None:
         G[np.frombuffer(integrated, dtype=int), np.arange(p)] = position_gain
     G.flags.writeable = False
-    return G, decay
+    return G, math.exp(-x)
+
+
+def _integrated_decay(x: float) -> float:
+    """``x - (1 - e^-x)`` without the cancellation of the direct form when ``x = dt / tau`` is small
+    (a long correlation time): its series below 1e-3, where it is exact to rounding."""
+    if x >= 1e-3:
+        return x + math.expm1(-x)
+    return x * x * (0.5 - x * (1.0 / 6.0 - x * (1.0 / 24.0 - x * (1.0 / 120.0 - x / 720.0))))
 
 
 @lru_cache(maxsize=32)

@@ -487,8 +487,9 @@ class EstimatorEngine:
             out["costate_norm_max"] = float(f.costate_norm_max)
         if hasattr(f, "gated"):
             out["gated"] = int(f.gated)
-        if hasattr(f, "model_probabilities"):
-            out["compensated_model_probability"] = float(f.model_probabilities[1])
+        probabilities = getattr(f, "model_probabilities", None)
+        if probabilities is not None:
+            out["compensated_model_probability"] = float(probabilities[1])
         if np.size(getattr(f, "unmodelled_acceleration", ())):  # a filter with compensation on
             acceleration = np.asarray(f.unmodelled_acceleration, dtype=float)
             sigma = np.sqrt(np.clip(np.diag(f.unmodelled_acceleration_covariance), 0.0, None))

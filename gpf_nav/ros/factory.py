@@ -10,6 +10,7 @@ import math
 import numpy as np
 
 from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME
+from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
 from gpf_nav.filters.multiple_model import SWITCH_TIME
 from gpf_nav.models.lunar import LunarDescentModel
 
@@ -22,7 +23,7 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
                 metric: str = "cloud", regularization: float = 0.0,
                 unmodelled_acceleration_std: float = UNMODELLED_ACCELERATION_STD,
                 unmodelled_acceleration_time: float = UNMODELLED_ACCELERATION_TIME,
-                kernel_bandwidth: float = 0.0, model_switch_time: float = SWITCH_TIME, collapse_steps: int = 0,
+                nominal_prior: float = NOMINAL_PRIOR, kernel_bandwidth: float = 0.0, model_switch_time: float = SWITCH_TIME, collapse_steps: int = 0,
                 resampling: str = "systematic", ess_threshold: float = 0.5, compute_costate: bool = True,
                 ukf_alpha: float = 1e-3, ukf_beta: float = 2.0, ukf_kappa: float = 0.0):
     """Build the filter called ``name`` (one of :data:`FILTERS`) on ``model``.
@@ -39,7 +40,8 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
                                   ukf_kappa=ukf_kappa, state_dim=model.state_dim,
                                   unmodelled_acceleration_std=unmodelled_acceleration_std,
                                   unmodelled_acceleration_time=unmodelled_acceleration_time,
-                                  kernel_bandwidth=kernel_bandwidth, model_switch_time=model_switch_time)
+                                  nominal_prior=nominal_prior, kernel_bandwidth=kernel_bandwidth,
+                                  model_switch_time=model_switch_time)
     if errors:
         raise ValueError("; ".join(errors))
     seed = None if seed is None or int(seed) < 0 else int(seed)
@@ -53,7 +55,7 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
                        ess_threshold=ess_threshold, seed=seed, collapse_steps=int(collapse_steps))
         if name == "gpf-mm":
             return MultipleModelGPF(model, int(n_particles), switch_time=model_switch_time, **options)
-        return GeometricProjectionPF(model, int(n_particles), **options)
+        return GeometricProjectionPF(model, int(n_particles), nominal_prior=nominal_prior, **options)
     if name == "spf":
         from gpf_nav.filters import BootstrapPF
         return BootstrapPF(model, int(n_particles), resampling=resampling, ess_threshold=ess_threshold,
@@ -87,7 +89,7 @@ def _core_class(class_name: str):
 def check_filter_options(name, *, n_particles, reference, weighting, regularization, resampling,
                          ess_threshold, metric="cloud", collapse_steps=0, ukf_alpha=1e-3,
                          ukf_kappa=0.0, state_dim=6, unmodelled_acceleration_std=0.0,
-                         unmodelled_acceleration_time=1.0, kernel_bandwidth=0.0,
+                         unmodelled_acceleration_time=1.0, nominal_prior=0.0, kernel_bandwidth=0.0,
                          model_switch_time=SWITCH_TIME) -> list[str]:
     """Human-readable errors for invalid filter parameters (empty when all are valid)."""
     from gpf_nav import resampling as resamplers
@@ -131,6 +133,8 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
         if not (math.isfinite(unmodelled_acceleration_time) and unmodelled_acceleration_time > 0.0):
             errors.append(f"parameter 'unmodelled_acceleration_time' = {unmodelled_acceleration_time!r} "
                           "must be positive [s]")
+        if not (isinstance(nominal_prior, (int, float)) and 0.0 <= nominal_prior < 1.0):
+            errors.append(f"parameter 'nominal_prior' = {nominal_prior!r} must lie in [0, 1)")
         if not (math.isfinite(kernel_bandwidth) and 0.0 <= kernel_bandwidth < 1.0):
             errors.append(f"parameter 'kernel_bandwidth' = {kernel_bandwidth!r} must lie in [0, 1) (0: optimal)")
     if name == "ukf":

@@ -37,6 +37,7 @@ ESTIMATOR = [
     Spec("regularization", 0.0, "Tikhonov eps of the projection, >= 0; 0: the metric's default (1 for cloud, 1e-6 otherwise); relative for euclidean, in measurement-noise units otherwise."),
     Spec("unmodelled_acceleration_std", 0.1, "gpf: stationary std of the estimated unmodelled acceleration [m/s^2]; 0 turns the compensation off."),
     Spec("unmodelled_acceleration_time", 1.0e6, "gpf: correlation time of the unmodelled acceleration [s], > 0."),
+    Spec("nominal_prior", 0.5, "gpf: prior probability that the model needs no unmodelled acceleration; the estimate averages the two hypotheses; 0 publishes the compensated posterior as it is; in [0, 1)."),
     Spec("model_switch_time", 2.0e5, "gpf-mm: mean sojourn time of the nominal / compensated model chain [s], > 0."),
     Spec("kernel_bandwidth", 0.0, "gpf, cloud metric: kernel bandwidth h in (0, 1); 0: the Gaussian-optimal one for N and the state dimension."),
     Spec("collapse_steps", 0, "gpf/spf: re-initialise after this many consecutive updates with ESS < 1.5 particles; 0 never."),
