@@ -38,7 +38,7 @@ import numpy as np
 
 from gpf_nav.filters.compensated import (UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME,
                                          ModelErrorCompensated)
-from gpf_nav.filters.kernel import match_moments, optimal_bandwidth, shrink, weighted_moments
+from gpf_nav.filters.kernel import default_bandwidth, match_moments, shrink, weighted_moments
 from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
 from gpf_nav.filters.particle import ParticleFilter, gaussian_shift_correction, select_rows
 from gpf_nav.filters.projection import project
@@ -86,7 +86,8 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         nominal_prior: prior probability that the model needs no unmodelled acceleration; the estimate
             (:attr:`mean`, :attr:`covariance`) is the model average of the two hypotheses
             (:mod:`gpf_nav.filters.model_averaging`); 0 gives the compensated posterior as it is.
-        kernel_bandwidth: ``h`` of the cloud metric's kernel in (0, 1); default the Gaussian-optimal one.
+        kernel_bandwidth: ``h`` of the cloud metric's kernel in (0, 1); default
+            :func:`~gpf_nav.filters.kernel.default_bandwidth` (1.4 times the Gaussian-optimal one).
         outlier_gate: cloud metric: a measured component whose innovation is beyond this many standard
             deviations is not used (counted in :attr:`gated`; its co-state is still computed, so the
             integrity monitor sees it); 0 disables the gate.
@@ -132,7 +133,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         self.weighting = weighting
         self.metric = metric
         self.regularization = float(regularization)
-        self.kernel_bandwidth = (optimal_bandwidth(self.n_particles, model.state_dim)
+        self.kernel_bandwidth = (default_bandwidth(self.n_particles, model.state_dim)
                                  if kernel_bandwidth is None else float(kernel_bandwidth))
         self._previous_y = np.full(model.measurement_dim, np.nan)
         self._input = None
