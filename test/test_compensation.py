@@ -212,3 +212,24 @@ def test_framed_transition_jacobian_matches_finite_differences():
     np.testing.assert_allclose(J[6:, :6], numeric[6:, :6], atol=1e-7)
     np.testing.assert_allclose(J[6:, 6:], numeric[6:, 6:], atol=2e-4)
     assert not np.allclose(J[6:, 6:], np.eye(3) * J[6, 6], atol=1e-4)  # the turn itself is in J
+
+
+def test_model_average_options_and_degenerate_posteriors():
+    from gpf_nav.filters.model_averaging import model_average
+
+    base = constant_velocity()
+    for bad in (-0.1, 1.0, float("nan")):
+        with pytest.raises(ValueError, match="nominal_prior"):
+            GeometricProjectionPF(base, 50, nominal_prior=bad)
+    assert GeometricProjectionPF(base, 50, unmodelled_acceleration_std=0.0).model_probabilities is None
+    mean, cov = np.array([1.0, 2.0, 0.5]), np.diag([4.0, 1.0, 0.01])
+    # a non-finite posterior, or a degenerate acceleration block: the compensated moments as they are
+    for m, P in ((np.array([1.0, np.nan, 0.5]), cov), (mean, np.diag([4.0, 1.0, np.inf])),
+                 (mean, np.diag([4.0, 1.0, 0.0]))):
+        probability, average_mean, average_cov = model_average(m, P, 2, SIGMA, 0.5)
+        assert probability == 0.0
+        np.testing.assert_array_equal(average_mean, m[:2])
+        np.testing.assert_array_equal(average_cov, P[:2, :2])
+    # far from zero: the nominal model is out (no underflow warning), and the estimate is the compensated one
+    probability, average_mean, _ = model_average(np.array([1.0, 2.0, 50.0]), cov, 2, SIGMA, 0.5)
+    assert probability == 0.0 and np.array_equal(average_mean, [1.0, 2.0])

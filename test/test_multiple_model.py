@@ -70,5 +70,8 @@ def test_options_are_checked_and_runs_repeat_bit_for_bit():
         MultipleModelGPF(constant_velocity(), switch_time=0.0)
     with pytest.raises(ValueError):
         MultipleModelGPF(constant_velocity(), unmodelled_acceleration_std=0.0)
+    with pytest.raises(ValueError, match="nominal_prior"):  # the IMM is its own test of the nominal model
+        MultipleModelGPF(constant_velocity(), nominal_prior=0.5)
+    assert MultipleModelGPF(constant_velocity()).compensated.model_probabilities is None
     ys = simulate(constant_velocity(), MEAN, 20, 1.0, seed=13)
     np.testing.assert_array_equal(run(ys, seed=5).covariance, run(ys, seed=5).covariance)
