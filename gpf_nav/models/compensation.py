@@ -68,6 +68,8 @@ class ModelErrorCompensation(StateSpaceModel):
         # the position each driven velocity integrates into (none for a model without positions)
         pairs = len(base.position_index) == len(base.velocity_index) and len(base.velocity_index) > 0
         self._integrated_into = np.asarray(base.position_index, dtype=int) if pairs else None
+        self._driven = _rows(self.acceleration_of)
+        self._integrated = None if self._integrated_into is None else _rows(self._integrated_into)
         p = len(driven)
         self.state_dim = n + p
         self.measurement_dim = base.measurement_dim
@@ -115,22 +117,27 @@ class ModelErrorCompensation(StateSpaceModel):
         return out
 
     def transition(self, x, dt, t=0.0, u=None):
-        xb, a = self._split(x)
+        """Built particle-last ``(n + p, N)`` and returned as its ``(N, n + p)`` view, like the models: the
+        filters store particles as ``(n + p, N)`` and pass the transpose, so every row here is contiguous
+        and their copy back is free."""
         G, decay = self._coupling(dt)
-        out = np.empty((x.shape[0], self.state_dim))
-        out[:, :self._n] = self.base.transition(xb, dt, t, u)
+        xt = x.T
+        a = xt[self._n:]  # (p, N)
+        out = np.empty((self.state_dim, x.shape[0]))
+        moved = out[:self._n]
+        moved[...] = self.base.transition(xt[:self._n].T, dt, t, u).T
         # G has one velocity (and one position) entry per column: add them without a matrix product
-        out[:, self.acceleration_of] += a * G[self.acceleration_of[0], 0]
+        moved[self._driven] += a * G[self.acceleration_of[0], 0]
         if self._integrated_into is not None:
-            out[:, self._integrated_into] += a * G[self._integrated_into[0], 0]
-        frames = self._frames(xb, out[:, :self._n])
+            moved[self._integrated] += a * G[self._integrated_into[0], 0]
+        frames = self._frames(xt[:self._n], moved)
         if frames is None:
-            np.multiply(a, decay, out=out[:, self._n:])
+            np.multiply(a, decay, out=out[self._n:])
         else:  # a turned with the frame, end start^T a, without forming the product of the frames
             start, end = frames
-            local = np.einsum("nij,ni->nj", start, a * decay)
-            np.einsum("nij,nj->ni", end, local, out=out[:, self._n:])
-        return out
+            local = np.einsum("ijn,in->jn", start, a * decay)
+            np.einsum("ijn,jn->in", end, local, out=out[self._n:])
+        return out.T
 
     def transition_jacobian(self, x, dt, t=0.0, u=None):
         xb, _ = self._split(x)
@@ -143,18 +150,22 @@ class ModelErrorCompensation(StateSpaceModel):
         return J
 
     def _frames(self, before: np.ndarray, after: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        """The base model's local frames ``(N, p, p)`` at the states ``before`` and ``after`` ``(N, n)``,
-        or None without a local frame."""
+        """The base model's local frames ``(p, p, N)`` (particle last) at the states ``before`` and
+        ``after`` ``(n, N)``, from one call on both, or None without a local frame."""
         if not self._framed:
             return None
-        start, end = self.base.compensation_frame(before), self.base.compensation_frame(after)
-        return None if start is None or end is None else (start, end)
+        frames = self.base.compensation_frame(np.concatenate((before, after), axis=1).T)
+        if frames is None:
+            return None
+        frames = frames.transpose(1, 2, 0)  # the particle-last array the model built (a view)
+        count = before.shape[1]
+        return frames[..., :count], frames[..., count:]
 
     def _turn(self, before: np.ndarray, after: np.ndarray) -> np.ndarray | None:
         """Rotation ``(N, p, p)`` carrying a vector fixed in the base model's local frame from the states
         ``before`` to ``after`` ``(N, n)``, or None without a local frame."""
-        frames = self._frames(before, after)
-        return None if frames is None else np.einsum("nik,njk->nij", frames[1], frames[0])
+        frames = self._frames(before.T, after.T)
+        return None if frames is None else np.einsum("ikn,jkn->nij", frames[1], frames[0])
 
     @property
     def time_varying_noise(self) -> bool:
@@ -215,6 +226,13 @@ class ModelErrorCompensation(StateSpaceModel):
         out[:self._n, :self._n] = cov
         out[self._n:, self._n:] = self.acceleration_std ** 2 * np.eye(self._p)
         return mean, out
+
+
+def _rows(index: np.ndarray) -> slice | np.ndarray:
+    """``index`` as a slice when its entries are consecutive (a view, no gather), else itself."""
+    if index.size and (np.diff(index) == 1).all():
+        return slice(int(index[0]), int(index[-1]) + 1)
+    return index
 
 
 @lru_cache(maxsize=32)

@@ -132,19 +132,19 @@ class LunarDescentModel(StateSpaceModel):
         ``N``) and returned as the ``(N, 3, 3)`` view."""
         xt = x.T
         r, v = xt[:3], xt[3:6]
-        radial = r / np.maximum(np.sqrt(np.einsum("in,in->n", r, r)), _MIN_RANGE)
-        normal = _cross(radial, v)
-        size = np.sqrt(np.einsum("in,in->n", normal, normal))
-        flat = ~(size > 1e-12 * np.maximum(np.sqrt(np.einsum("in,in->n", v, v)), 1.0))
-        if flat.any():  # any axis normal to r: the cross product with the least-aligned base axis
-            base = np.eye(3)[:, np.argmin(np.abs(radial[:, flat]), axis=0)]
-            normal[:, flat] = _cross(radial[:, flat], base)
-            size[flat] = np.sqrt(np.einsum("in,in->n", normal[:, flat], normal[:, flat]))
-        with np.errstate(invalid="ignore", divide="ignore"):  # r = 0: no frame, replaced below
-            normal /= size
         frame = np.empty((3, 3, x.shape[0]))  # (component, axis, particle)
-        frame[:, 0], frame[:, 1], frame[:, 2] = radial, _cross(normal, radial), normal
-        bad = ~np.isfinite(frame).all(axis=(0, 1))
+        radial, along, normal = frame[:, 0], frame[:, 1], frame[:, 2]
+        np.divide(r, np.maximum(np.sqrt(np.einsum("in,in->n", r, r)), _MIN_RANGE), out=radial)
+        _cross(radial, v, out=normal)
+        size = np.sqrt(np.einsum("in,in->n", normal, normal))
+        in_plane = size > 1e-12 * np.maximum(np.sqrt(np.einsum("in,in->n", v, v)), 1.0)
+        if in_plane.all():  # every size is then positive (and the normals finite): nothing to warn about
+            normal /= size
+        else:
+            _any_normal(radial, normal, size, ~in_plane)
+        _cross(normal, radial, out=along)
+        # the entries of a frame are at most 1 in magnitude: their sum is finite exactly when they are
+        bad = ~np.isfinite(np.einsum("ijn->n", frame))
         if bad.any():  # at the Moon's centre, or a non-finite x
             frame[:, :, bad] = np.eye(3)[:, :, None]
         return frame.transpose(2, 0, 1)
@@ -205,6 +205,23 @@ def _as_input(u):
     return None if not np.any(u) else u
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross products ``(3, N)`` of the columns of ``a`` and ``b`` ``(3, N)``."""
-    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+def _any_normal(radial: np.ndarray, normal: np.ndarray, size: np.ndarray, flat: np.ndarray) -> None:
+    """Normalise ``normal`` ``(3, N)`` (of norms ``size`` ``(N,)``) in place; where the orbit plane is
+    undefined (``flat``), an axis normal to ``radial`` ``(3, N)`` instead: the cross product with the
+    least-aligned base axis. Where ``radial`` is zero or non-finite, the result is not finite."""
+    base = np.eye(3)[:, np.argmin(np.abs(radial[:, flat]), axis=0)]
+    normal[:, flat] = _cross(radial[:, flat], base)
+    size[flat] = np.sqrt(np.einsum("in,in->n", normal[:, flat], normal[:, flat]))
+    with np.errstate(invalid="ignore", divide="ignore"):  # r = 0: no frame
+        normal /= size
+
+
+def _cross(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Cross products ``(3, N)`` of the columns of ``a`` and ``b`` ``(3, N)``, written into ``out`` when
+    given."""
+    if out is None:
+        out = np.empty(a.shape)
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):  # the three components
+        np.multiply(a[j], b[k], out=out[i])
+        out[i] -= a[k] * b[j]
+    return out
