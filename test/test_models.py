@@ -38,6 +38,21 @@ def test_lunar_measurement_jacobian_matches_finite_differences(station):
     np.testing.assert_array_equal(h, model.measure(x))
 
 
+def test_lunar_one_point_jacobian_is_the_batched_one():
+    """The one-point path (Python floats, used at the GPF's cloud mean) gives the batched path's numbers
+    exactly, also at the station, on its vertical and for a non-finite state."""
+    model = LunarDescentModel(station=(1.2e6, -3.0e5, 9.0e5))
+    x = np.vstack([_states(np.random.default_rng(3)),
+                   [[1.2e6, -3.0e5, 9.0e5, 1.0, 2.0, 3.0],  # at the station
+                    [1.2e6, -3.0e5, 2.0e6, 0.0, 0.0, 0.0],  # straight above it
+                    [np.nan, 0.0, 0.0, 0.0, 0.0, 0.0],
+                    [np.inf, 0.0, 0.0, 0.0, 0.0, 0.0]]])
+    with np.errstate(invalid="ignore"):
+        batched = model.measurement_jacobian(x)
+    for state, expected in zip(x, batched):
+        np.testing.assert_array_equal(model.measurement_jacobian(state[None]), expected[None])
+
+
 @pytest.mark.parametrize("dt", [2.0, 35.0])
 def test_lunar_transition_jacobian_matches_finite_differences(dt):
     """Second-order Taylor per sub-step: close to, not equal to, the leapfrog flow's derivative."""

@@ -167,7 +167,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         """
         if self.metric != "cloud" or not rows.any():
             return super()._sample(x_pred, y, rows, dt)
-        centres, D = shrink(x_pred, self._weights, self.kernel_bandwidth)
+        mean, centres, D = shrink(x_pred, self._weights, self.kernel_bandwidth)
         if dt > 0.0:
             D += self.model.process_noise(dt, self._pending_t)
         C = cholesky_or_none(D) if np.isfinite(D).all() else None
@@ -175,7 +175,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
             self._set_costate(None, rows, dt)
             return super()._sample(x_pred, y, rows, dt)
         n, eps = self.model.state_dim, self.regularization
-        H = self.model.measurement_jacobian((centres @ self._weights)[None], self.time)[0]  # (m, n)
+        H = self.model.measurement_jacobian(mean[None], self.time)[0]  # (m, n), at the cloud's mean
         r = self.model.residual(y, self.model.measure(centres.T, self.time))  # (N, m)
         whitened = self._whitened(H, r, rows, C)
         if whitened is None:
@@ -199,18 +199,19 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         E = C @ B.T  # (n, k): K = E L^-1 W
         proposal_means = E @ white_r
         proposal_means += centres
-        x = np.hstack((C - E @ B, math.sqrt(eps) * (E @ L_inv))) @ normals  # A [z; v]
+        weighted = self.weighting != "likelihood"
+        draws = _proposal_map(C, B, E, L_inv, eps, weighted) @ normals  # [x - means; e; 2 sqrt(eps) L^-1 e]
+        x = draws[:n]
         x += proposal_means
         if self.moment_matching:
             self._proposal = (proposal_means, D - E @ E.T)  # the spread (I - K H) D = A A^T
-        if self.weighting == "likelihood":
+        if not weighted:
             return x, 0.0, used
         # log N(x; centre, D) - log q(x) = (|p|^2 - |p + m|^2 + |e|^2 + constant) / 2 with the whitened
         # p = C^-1 (x - proposal mean) and m = C^-1 (proposal mean - centre) = B^T L^-1 W r, and
         # sqrt(eps) e = W H (x - proposal mean) = G p, e = [sqrt(eps) L^-T B, I - eps S^-1] [z; v];
         # |p|^2 - |p + m|^2 = -L^-1 W r . (2 B p + B B^T L^-1 W r) with B p = sqrt(eps) L^-1 e
-        e = np.hstack((math.sqrt(eps) * (L_inv.T @ B), np.eye(k) - eps * (L_inv.T @ L_inv))) @ normals
-        cross = (2.0 * math.sqrt(eps) * L_inv) @ e
+        e, cross = draws[n:n + k], draws[n + k:]
         cross += (B @ B.T) @ white_r
         correction = np.einsum("kn,kn->n", e, e)
         correction -= np.einsum("kn,kn->n", white_r, cross)
@@ -235,7 +236,8 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
             G, wr = W @ H @ C, W @ r.T
         S = G @ G.T
         S.flat[::S.shape[0] + 1] += self.regularization  # the diagonal
-        if not (np.isfinite(S).all() and S.trace() < ILL_CONDITIONED * self.regularization):
+        # S = G G^T + eps I: a finite trace bounds every entry, and a NaN fails the comparison
+        if not S.trace() < ILL_CONDITIONED * self.regularization:
             return None
         L = cholesky_or_none(S)
         return None if L is None else (G, wr, S, triangular_inverse(L))
@@ -248,13 +250,15 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         itself when no component is left out."""
         if not self.outlier_gate:
             return rows
-        outlier = np.abs(innovation) > self.outlier_gate * np.sqrt(S.diagonal())
+        # a few components: Python floats cost less than numpy calls on arrays of three
+        limits = [self.outlier_gate * math.sqrt(s) for s in S.diagonal().tolist()]
+        outlier = [abs(v) > limit for v, limit in zip(innovation.tolist(), limits)]
         streak = self._gate_streak
-        if not outlier.any():
+        if not any(outlier):
             streak[rows] = 0
             return rows
         refused = []
-        for i, is_outlier in zip(np.flatnonzero(rows).tolist(), outlier.tolist()):  # a few components
+        for i, is_outlier in zip(np.flatnonzero(rows).tolist(), outlier):  # a few components
             streak[i] = streak[i] + 1 if is_outlier else 0
             if is_outlier and streak[i] <= self.outlier_gate_limit:
                 refused.append(i)
@@ -327,3 +331,24 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
 
     def _after_update(self, y, rows):
         self._previous_y = np.where(rows, y, np.nan)
+
+
+def _proposal_map(C: np.ndarray, B: np.ndarray, E: np.ndarray, L_inv: np.ndarray, eps: float,
+                  weighted: bool) -> np.ndarray:
+    """The matrix taking the cloud metric's normal draws ``[z; v]`` ``(n + k, N)`` to the proposal draw
+    less its mean, ``A [z; v]`` with ``A = [C - E B, sqrt(eps) E L^-1]`` ``(n, n + k)``, and, when
+    ``weighted``, also to the whitened measurement error ``e = [sqrt(eps) L^-T B, I - eps S^-1] [z; v]``
+    and to ``2 sqrt(eps) L^-1 e``: one product for the draw and its weight. ``C`` ``(n, n)``,
+    ``B = L^-1 G`` ``(k, n)``, ``E = C B^T`` ``(n, k)``, ``L^-1`` ``(k, k)``; returns ``(n, n + k)`` or
+    ``(n + 2 k, n + k)``."""
+    n, k = C.shape[0], L_inv.shape[0]
+    root = math.sqrt(eps)
+    A = np.empty((n + 2 * k if weighted else n, n + k))
+    np.subtract(C, E @ B, out=A[:n, :n])
+    np.multiply(root, E @ L_inv, out=A[:n, n:])
+    if weighted:
+        error = A[n:n + k]
+        np.multiply(root, L_inv.T @ B, out=error[:, :n])
+        np.subtract(np.eye(k), eps * (L_inv.T @ L_inv), out=error[:, n:])  # I - eps S^-1
+        np.matmul((2.0 * root) * L_inv, error, out=A[n + k:])
+    return A

@@ -47,14 +47,14 @@ def weighted_moments(x: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np
     return mean, d, (d * weights) @ d.T
 
 
-def shrink(x: np.ndarray, weights: np.ndarray, bandwidth: float) -> tuple[np.ndarray, np.ndarray]:
-    """Kernel centres ``(n, N)`` and kernel covariance ``h^2 P`` ``(n, n)`` of the cloud ``x`` ``(n, N)``
-    with normalised ``weights`` ``(N,)``."""
+def shrink(x: np.ndarray, weights: np.ndarray, bandwidth: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Weighted mean ``m`` ``(n,)`` (the centres' too), kernel centres ``(n, N)`` and kernel covariance
+    ``h^2 P`` ``(n, n)`` of the cloud ``x`` ``(n, N)`` with normalised ``weights`` ``(N,)``."""
     mean, _, cov = weighted_moments(x, weights)
     a = np.sqrt(1.0 - bandwidth ** 2)
     centres = a * x
     centres += ((1.0 - a) * mean)[:, None]
-    return centres, bandwidth ** 2 * 0.5 * (cov + cov.T)
+    return mean, centres, bandwidth ** 2 * 0.5 * (cov + cov.T)
 
 
 def match_moments(x: np.ndarray, weights: np.ndarray, mean: np.ndarray,
