@@ -137,16 +137,14 @@ class LunarDescentModel(StateSpaceModel):
         np.divide(r, np.maximum(np.sqrt(np.einsum("in,in->n", r, r)), _MIN_RANGE), out=radial)
         _cross(radial, v, out=normal)
         size = np.sqrt(np.einsum("in,in->n", normal, normal))
-        in_plane = size > 1e-12 * np.maximum(np.sqrt(np.einsum("in,in->n", v, v)), 1.0)
-        if in_plane.all():  # every size is then positive (and the normals finite): nothing to warn about
+        speed2 = np.einsum("in,in->n", v, v)
+        # every orbit plane defined when the smallest size passes the largest speed's threshold; the sizes
+        # are then positive and the states finite (a non-finite one fails the test): a frame of finite axes
+        if size.min() > 1e-12 * max(math.sqrt(speed2.max()), 1.0):
             normal /= size
+            _cross(normal, radial, out=along)
         else:
-            _any_normal(radial, normal, size, ~in_plane)
-        _cross(normal, radial, out=along)
-        # the entries of a frame are at most 1 in magnitude: their sum is finite exactly when they are
-        bad = ~np.isfinite(np.einsum("ijn->n", frame))
-        if bad.any():  # at the Moon's centre, or a non-finite x
-            frame[:, :, bad] = np.eye(3)[:, :, None]
+            _degenerate_frames(frame, size, speed2)
         return frame.transpose(2, 0, 1)
 
     def process_noise(self, dt):
@@ -222,15 +220,22 @@ def _as_input(u):
     return None if not np.any(u) else u
 
 
-def _any_normal(radial: np.ndarray, normal: np.ndarray, size: np.ndarray, flat: np.ndarray) -> None:
-    """Normalise ``normal`` ``(3, N)`` (of norms ``size`` ``(N,)``) in place; where the orbit plane is
-    undefined (``flat``), an axis normal to ``radial`` ``(3, N)`` instead: the cross product with the
-    least-aligned base axis. Where ``radial`` is zero or non-finite, the result is not finite."""
+def _degenerate_frames(frame: np.ndarray, size: np.ndarray, speed2: np.ndarray) -> None:
+    """Finish :meth:`LunarDescentModel.compensation_frame` ``(3, 3, N)`` (radial axes and unnormalised
+    normals ``(3, N)`` of norms ``size`` in place) where some orbit plane is undefined (``r`` parallel to
+    ``v``, of squared norms ``speed2`` ``(N,)``): there any axis normal to ``r``, the cross product with the
+    least-aligned base axis; where no frame results (``r = 0``, a non-finite state), the world's."""
+    radial, along, normal = frame[:, 0], frame[:, 1], frame[:, 2]
+    flat = ~(size > 1e-12 * np.maximum(np.sqrt(speed2), 1.0))
     base = np.eye(3)[:, np.argmin(np.abs(radial[:, flat]), axis=0)]
     normal[:, flat] = _cross(radial[:, flat], base)
     size[flat] = np.sqrt(np.einsum("in,in->n", normal[:, flat], normal[:, flat]))
-    with np.errstate(invalid="ignore", divide="ignore"):  # r = 0: no frame
+    with np.errstate(invalid="ignore", divide="ignore"):  # r = 0: no frame, replaced below
         normal /= size
+    _cross(normal, radial, out=along)
+    bad = ~np.isfinite(frame).all(axis=(0, 1))
+    if bad.any():
+        frame[:, :, bad] = np.eye(3)[:, :, None]
 
 
 def _cross(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
