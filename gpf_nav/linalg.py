@@ -25,10 +25,11 @@ def psd_sqrt(cov: np.ndarray) -> np.ndarray:
     return vecs * np.sqrt(np.clip(vals, 0.0, None))
 
 
-def cholesky_or_none(cov: np.ndarray) -> np.ndarray | None:
-    """Lower Cholesky factor of a symmetric ``(n, n)`` matrix (of its symmetric part), or None when it is
-    not positive definite. Check finiteness first: a non-finite entry may give a non-finite factor."""
-    factor, info = dpotrf(0.5 * (cov + cov.T), lower=1, clean=1)
+def cholesky_or_none(cov: np.ndarray, symmetric: bool = False) -> np.ndarray | None:
+    """Lower Cholesky factor of a symmetric ``(n, n)`` matrix (of its symmetric part, unless ``symmetric``
+    says it is exactly symmetric already), or None when it is not positive definite. Check finiteness
+    first: a non-finite entry may give a non-finite factor."""
+    factor, info = dpotrf(cov if symmetric else 0.5 * (cov + cov.T), lower=1, clean=1)
     return factor if info == 0 else None
 
 

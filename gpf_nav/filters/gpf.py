@@ -234,12 +234,12 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
             G, wr = (H * W[:, None]) @ C, r.T * W[:, None]
         else:
             G, wr = W @ H @ C, W @ r.T
-        S = G @ G.T
+        S = G @ G.T  # exactly symmetric (numpy forms A A^T as such)
         S.flat[::S.shape[0] + 1] += self.regularization  # the diagonal
         # S = G G^T + eps I: a finite trace bounds every entry, and a NaN fails the comparison
         if not S.trace() < ILL_CONDITIONED * self.regularization:
             return None
-        L = cholesky_or_none(S)
+        L = cholesky_or_none(S, symmetric=True)
         return None if L is None else (G, wr, S, triangular_inverse(L))
 
     def _gate(self, innovation: np.ndarray, S: np.ndarray, rows: np.ndarray) -> np.ndarray:
@@ -297,8 +297,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
             return
         weighted, mean, cov = self._moment_target
         self._moment_target = None
-        uniform = np.full(self.n_particles, 1.0 / self.n_particles)
-        matched = match_moments(self._x, uniform, mean, cov)
+        matched = match_moments(self._x, None, mean, cov)  # the resampled cloud's weights are equal
         if matched is None:
             matched = match_moments(weighted, self._weights, mean, cov)
             matched = None if matched is None else matched[:, ancestors]

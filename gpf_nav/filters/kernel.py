@@ -17,6 +17,8 @@ leaves the filter's covariance too small where the measurements see little (docs
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from gpf_nav.linalg import cholesky_or_none, triangular_inverse
@@ -39,9 +41,13 @@ def default_bandwidth(n_particles: int, dim: int) -> float:
     return min(MAX_BANDWIDTH, BANDWIDTH_SCALE * optimal_bandwidth(n_particles, dim))
 
 
-def weighted_moments(x: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def weighted_moments(x: np.ndarray, weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(mean (n,), deviations x - mean (n, N), covariance (n, n))`` of the cloud ``x`` ``(n, N)`` with
-    normalised ``weights`` ``(N,)``."""
+    normalised ``weights`` ``(N,)``, or equal weights when None (one pass less)."""
+    if weights is None:
+        mean = x.mean(axis=1)
+        d = x - mean[:, None]
+        return mean, d, (d @ d.T) * (1.0 / x.shape[1])
     mean = x @ weights
     d = x - mean[:, None]
     return mean, d, (d * weights) @ d.T
@@ -51,17 +57,18 @@ def shrink(x: np.ndarray, weights: np.ndarray, bandwidth: float) -> tuple[np.nda
     """Weighted mean ``m`` ``(n,)`` (the centres' too), kernel centres ``(n, N)`` and kernel covariance
     ``h^2 P`` ``(n, n)`` of the cloud ``x`` ``(n, N)`` with normalised ``weights`` ``(N,)``."""
     mean, _, cov = weighted_moments(x, weights)
-    a = np.sqrt(1.0 - bandwidth ** 2)
+    a = math.sqrt(1.0 - bandwidth ** 2)
     centres = a * x
     centres += ((1.0 - a) * mean)[:, None]
     return mean, centres, bandwidth ** 2 * 0.5 * (cov + cov.T)
 
 
-def match_moments(x: np.ndarray, weights: np.ndarray, mean: np.ndarray,
+def match_moments(x: np.ndarray, weights: np.ndarray | None, mean: np.ndarray,
                   cov: np.ndarray) -> np.ndarray | None:
-    """The cloud ``x`` ``(n, N)`` moved by an affine map so that its weighted mean and covariance are
-    ``mean`` ``(n,)`` and ``cov`` ``(n, n)`` exactly: ``mean + L_cov L_x^-1 (x - m_x)``. None when the
-    cloud's covariance is singular (nothing to map from) or ``cov`` is not positive definite.
+    """The cloud ``x`` ``(n, N)`` moved by an affine map so that its weighted mean and covariance (equal
+    weights when ``weights`` is None) are ``mean`` ``(n,)`` and ``cov`` ``(n, n)`` exactly:
+    ``mean + L_cov L_x^-1 (x - m_x)``. None when the cloud's covariance is singular (nothing to map from)
+    or ``cov`` is not positive definite.
 
     The map of ``T x + b``, for ``T`` lower triangular with a positive diagonal (such as this map), is
     the map of ``x`` (the Cholesky factor of ``T P T^T`` is ``T L_P``): mapping a cloud, resampling it

@@ -85,6 +85,9 @@ class ModelErrorCompensation(StateSpaceModel):
         self._framed = bool(base.velocity_index) and type(base).compensation_frame is not \
             StateSpaceModel.compensation_frame
         self._A = self._linear_chain()
+        self._coupling_key = (n, p, self.acceleration_of.tobytes(),
+                              None if self._integrated_into is None else self._integrated_into.tobytes(),
+                              self.time_constant)  # the arguments of the cached _coupling but dt
         self._noise_cache: tuple[tuple[float, float] | None, np.ndarray | None] = (None, None)
 
     # --- the linear part driven by a ------------------------------------------------------------------
@@ -100,9 +103,7 @@ class ModelErrorCompensation(StateSpaceModel):
 
     def _coupling(self, dt: float) -> tuple[np.ndarray, float]:
         """``(G (n, p), decay)``: the change of ``x`` per unit ``a`` over ``dt``, and ``exp(-dt/tau)``."""
-        return _coupling(self._n, self._p, self.acceleration_of.tobytes(),
-                         None if self._integrated_into is None else self._integrated_into.tobytes(),
-                         self.time_constant, float(dt))
+        return _coupling(*self._coupling_key, float(dt))
 
     def _split(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return x[:, :self._n], x[:, self._n:]
