@@ -200,7 +200,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         proposal_means = E @ white_r
         proposal_means += centres
         weighted = self.weighting != "likelihood"
-        draws = _proposal_map(C, B, E, L_inv, eps, weighted) @ normals  # [x - means; e; 2 sqrt(eps) L^-1 e]
+        draws = _proposal_map(C, B, E, L_inv, eps, weighted) @ normals  # [x - proposal means; e]
         x = draws[:n]
         x += proposal_means
         if self.moment_matching:
@@ -211,7 +211,8 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         # p = C^-1 (x - proposal mean) and m = C^-1 (proposal mean - centre) = B^T L^-1 W r, and
         # sqrt(eps) e = W H (x - proposal mean) = G p, e = [sqrt(eps) L^-T B, I - eps S^-1] [z; v];
         # |p|^2 - |p + m|^2 = -L^-1 W r . (2 B p + B B^T L^-1 W r) with B p = sqrt(eps) L^-1 e
-        e, cross = draws[n:n + k], draws[n + k:]
+        e = draws[n:]
+        cross = (2.0 * math.sqrt(eps) * L_inv) @ e
         cross += (B @ B.T) @ white_r
         correction = np.einsum("kn,kn->n", e, e)
         correction -= np.einsum("kn,kn->n", white_r, cross)
@@ -336,18 +337,15 @@ def _proposal_map(C: np.ndarray, B: np.ndarray, E: np.ndarray, L_inv: np.ndarray
                   weighted: bool) -> np.ndarray:
     """The matrix taking the cloud metric's normal draws ``[z; v]`` ``(n + k, N)`` to the proposal draw
     less its mean, ``A [z; v]`` with ``A = [C - E B, sqrt(eps) E L^-1]`` ``(n, n + k)``, and, when
-    ``weighted``, also to the whitened measurement error ``e = [sqrt(eps) L^-T B, I - eps S^-1] [z; v]``
-    and to ``2 sqrt(eps) L^-1 e``: one product for the draw and its weight. ``C`` ``(n, n)``,
-    ``B = L^-1 G`` ``(k, n)``, ``E = C B^T`` ``(n, k)``, ``L^-1`` ``(k, k)``; returns ``(n, n + k)`` or
-    ``(n + 2 k, n + k)``."""
+    ``weighted``, also to the whitened measurement error ``e = [sqrt(eps) L^-T B, I - eps S^-1] [z; v]``:
+    one product for the draw and its weight. ``C`` ``(n, n)``, ``B = L^-1 G`` ``(k, n)``, ``E = C B^T``
+    ``(n, k)``, ``L^-1`` ``(k, k)``; returns ``(n, n + k)`` or ``(n + k, n + k)``."""
     n, k = C.shape[0], L_inv.shape[0]
     root = math.sqrt(eps)
-    A = np.empty((n + 2 * k if weighted else n, n + k))
+    A = np.empty((n + k if weighted else n, n + k))
     np.subtract(C, E @ B, out=A[:n, :n])
     np.multiply(root, E @ L_inv, out=A[:n, n:])
     if weighted:
-        error = A[n:n + k]
-        np.multiply(root, L_inv.T @ B, out=error[:, :n])
-        np.subtract(np.eye(k), eps * (L_inv.T @ L_inv), out=error[:, n:])  # I - eps S^-1
-        np.matmul((2.0 * root) * L_inv, error, out=A[n + k:])
+        np.multiply(root, L_inv.T @ B, out=A[n:, :n])
+        np.subtract(np.eye(k), eps * (L_inv.T @ L_inv), out=A[n:, n:])  # I - eps S^-1
     return A
