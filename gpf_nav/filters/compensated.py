@@ -68,6 +68,10 @@ class ModelErrorCompensated:
             return 0.0, mean[:n], cov[:n, :n]
         return model_average(mean, cov, n, self.model.acceleration_std, self.nominal_prior)
 
+    def _estimate(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(mean (n,), covariance (n, n))`` from one model average."""
+        return self._average()[1:]
+
     @property
     def mean(self) -> np.ndarray:
         """Estimate of the user's state ``(n,)``: the model average (module docstring)."""

@@ -197,7 +197,12 @@ class ParticleFilter(Filter):
         self._check_collapse()
         self._updates += 1
         if self._updates % _REMEMBER_EVERY == 0:
-            self._remember(self.mean, self.covariance)
+            self._remember(*self._estimate())
+
+    def _estimate(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(mean, covariance)`` of the estimate, as :meth:`_remember` keeps it (one call where a
+        subclass derives both from the same work)."""
+        return self.mean, self.covariance
 
     def _discard_non_finite(self) -> bool:
         """Give non-finite particles zero weight (and a finite placeholder state); recover when none
