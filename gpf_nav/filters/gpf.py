@@ -38,7 +38,7 @@ import numpy as np
 
 from gpf_nav.filters.compensated import (UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME,
                                          ModelErrorCompensated)
-from gpf_nav.filters.kernel import default_bandwidth, match_moments, shrink, weighted_moments
+from gpf_nav.filters.kernel import default_bandwidth, map_moments, match_moments, paired_moments, shrink
 from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
 from gpf_nav.filters.particle import ParticleFilter, gaussian_shift_correction, select_rows
 from gpf_nav.filters.projection import project
@@ -197,14 +197,14 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         normals = self.rng.standard_normal((n + k, self.n_particles))  # [z; v] (drawn z, then v)
         B = L_inv @ G  # (k, n)
         E = C @ B.T  # (n, k): K = E L^-1 W
-        proposal_means = E @ white_r
+        pair = np.empty((2 * n, self.n_particles))  # [proposal means; x]: weighed together after the update
+        proposal_means = np.matmul(E, white_r, out=pair[:n])
         proposal_means += centres
         weighted = self.weighting != "likelihood"
         draws = _proposal_map(C, B, E, L_inv, eps, weighted) @ normals  # [x - proposal means; e]
-        x = draws[:n]
-        x += proposal_means
+        x = np.add(draws[:n], proposal_means, out=pair[n:])
         if self.moment_matching:
-            self._proposal = (proposal_means, D - E @ E.T)  # the spread (I - K H) D = A A^T
+            self._proposal = (pair, D - E @ E.T)  # the spread (I - K H) D = A A^T
         if not weighted:
             return x, 0.0, used
         # log N(x; centre, D) - log q(x) = (|p|^2 - |p + m|^2 + |e|^2 + constant) / 2 with the whitened
@@ -277,16 +277,18 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         in the same place (:func:`match_moments`)."""
         if self._proposal is None:
             return
-        mu, spread = self._proposal
+        pair, spread = self._proposal  # the proposal means and the particles (self._x is pair[n:])
         self._proposal = None
-        mean, _, cov = weighted_moments(mu, self._weights)
+        n = spread.shape[0]
+        means, d, cov, current = paired_moments(pair, self._weights, n)
+        mean = means[:n]
         cov += spread
         if not np.isfinite(cov).all():  # (a non-finite mean makes the covariance non-finite)
             return  # a runaway proposal: leave the sampled cloud to the non-finite checks
         if resampling:
             self._moment_target = (self._x, mean, cov)
             return
-        matched = match_moments(self._x, self._weights, mean, cov)
+        matched = map_moments(d[n:], current, mean, cov)
         if matched is not None:
             self._x = matched
 

@@ -54,6 +54,17 @@ def weighted_moments(x: np.ndarray, weights: np.ndarray | None) -> tuple[np.ndar
     return mean, d, (d * weights) @ d.T
 
 
+def paired_moments(x: np.ndarray, weights: np.ndarray, n: int
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`weighted_moments` of the two clouds stacked in ``x`` ``(2 n, N)`` (rows ``:n`` and ``n:``)
+    with normalised ``weights`` ``(N,)``, one pass over both for their means and deviations:
+    ``(means (2 n,), deviations (2 n, N), covariance of the first (n, n), of the second (n, n))``."""
+    mean = x @ weights
+    d = x - mean[:, None]
+    dw = d * weights
+    return mean, d, dw[:n] @ d[:n].T, dw[n:] @ d[n:].T
+
+
 def shrink(x: np.ndarray, weights: np.ndarray, bandwidth: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Weighted mean ``m`` ``(n,)`` (the centres' too), kernel centres ``(n, N)`` and kernel covariance
     ``h^2 P`` ``(n, n)`` of the cloud ``x`` ``(n, N)`` with normalised ``weights`` ``(N,)``."""
@@ -75,6 +86,12 @@ def match_moments(x: np.ndarray, weights: np.ndarray | None, mean: np.ndarray,
     the map of ``x`` (the Cholesky factor of ``T P T^T`` is ``T L_P``): mapping a cloud, resampling it
     and mapping the copies moves them where mapping the resampled copies once does."""
     _, d, current = weighted_moments(x, weights)
+    return map_moments(d, current, mean, cov)
+
+
+def map_moments(d: np.ndarray, current: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> np.ndarray | None:
+    """:func:`match_moments` of a cloud given by its deviations from its mean ``d`` ``(n, N)`` and its
+    covariance ``current`` ``(n, n)``: ``mean + L_cov L_current^-1 d``, or None."""
     if not np.isfinite(current).all():
         return None
     source, target = cholesky_or_none(current), cholesky_or_none(cov)
