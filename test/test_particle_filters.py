@@ -253,6 +253,26 @@ def test_match_moments_of_a_lower_triangular_image_is_the_map_of_the_original():
     assert match_moments(x[:, :3], np.full(3, 1 / 3), mean, cov) is None  # a singular cloud: no map
 
 
+def test_equal_weight_and_paired_moments_are_the_weighted_ones():
+    """The shortcuts of the GPF's moment matching: weights None means equal weights, and the moments of
+    two stacked clouds are each cloud's own."""
+    from gpf_nav.filters.kernel import paired_moments, weighted_moments
+
+    rng = np.random.default_rng(6)
+    x = rng.standard_normal((6, 300)) * 1e3 + 1.7e6
+    w = rng.random(300)
+    w /= w.sum()
+    equal = weighted_moments(x[:3], np.full(300, 1.0 / 300))
+    for got, expected in zip(weighted_moments(x[:3], None), equal):
+        np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-9)
+    means, d, first, second = paired_moments(x, w, 3)
+    for half, cov in ((slice(0, 3), first), (slice(3, 6), second)):
+        mean, deviations, expected = weighted_moments(x[half], w)
+        np.testing.assert_allclose(means[half], mean, rtol=1e-15)
+        np.testing.assert_allclose(d[half], deviations, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(cov, expected, rtol=1e-12)
+
+
 def test_default_gpf_resampled_cloud_has_the_moments_of_the_weighted_one():
     """One update, resampling always (tau = 1) or never: both clouds carry the moments of the mixture of
     proposals, the resampled one with uniform weights."""
