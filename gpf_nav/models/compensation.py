@@ -89,6 +89,7 @@ class ModelErrorCompensation(StateSpaceModel):
                               None if self._integrated_into is None else self._integrated_into.tobytes(),
                               self.time_constant)  # the arguments of the cached _coupling but dt
         self._noise_cache: tuple[tuple[float, float] | None, np.ndarray | None] = (None, None)
+        self._time_varying_noise = base.time_varying_noise  # a property of the base model's class
 
     # --- the linear part driven by a ------------------------------------------------------------------
     def _linear_chain(self) -> np.ndarray:
@@ -176,7 +177,7 @@ class ModelErrorCompensation(StateSpaceModel):
         """Base ``Q`` over ``[t, t + dt]`` plus the Gauss-Markov part; cached for the last ``dt`` (and the
         last ``t`` when the base model's noise varies with time, see ``time_varying_noise``)."""
         dt = float(dt)
-        key = (dt, float(t) if self.base.time_varying_noise else 0.0)
+        key = (dt, float(t) if self._time_varying_noise else 0.0)
         if self._noise_cache[0] != key:
             Q = np.zeros((self.state_dim, self.state_dim))
             Q[:self._n, :self._n] = self.base.process_noise(dt, t)
