@@ -122,6 +122,24 @@ def test_rank_deficient_projection_stays_finite(mask):
     assert np.all(f.costate[:, ~np.asarray(mask)] == 0.0)
 
 
+def test_gpf_recovery_inside_an_update_leaves_no_proposal_behind():
+    """An update that re-initialises the filter after drawing its proposal (here: every weight NaN) must
+    not hand that proposal to a later update: the next one, without measurements, keeps the recovered
+    cloud where the prediction put it instead of mapping it back to the abandoned draw."""
+    f = GeometricProjectionPF(LunarDescentModel(), n_particles=300, seed=3)
+    truth = run_lunar(f, steps=5)
+    y = f.model.measure(truth[None])[0]
+    f._log_likelihood = lambda x, y, rows: np.full(x.shape[1], np.nan)  # every weight NaN: a recovery
+    f.predict(2.0)
+    f.update(y)
+    del f._log_likelihood
+    assert f.recoveries == 1
+    f.predict(2.0)
+    predicted = f.mean
+    f.update(np.full(3, np.nan))
+    assert np.linalg.norm(f.mean[:3] - predicted[:3]) < 1.0  # metres; the abandoned draw is ~3 km behind
+
+
 def test_gpf_tracks_lunar_truth():
     f = GeometricProjectionPF(LunarDescentModel(), n_particles=500, seed=2)
     truth = run_lunar(f, steps=50)

@@ -148,6 +148,9 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
     def initialize(self, mean, cov, t0=0.0):
         super().initialize(mean, cov, t0)
         self._previous_y = np.full(self.model.measurement_dim, np.nan)
+        # an update that recovered (re-initialised) before weighting left its proposal behind: the new
+        # cloud is not the one it drew
+        self._proposal = self._moment_target = None
 
     # --- the proposal ---------------------------------------------------------------------------------
     def predict(self, dt, u=None):
