@@ -344,13 +344,17 @@ def _proposal_map(C: np.ndarray, B: np.ndarray, E: np.ndarray, L_inv: np.ndarray
     less its mean, ``A [z; v]`` with ``A = [C - E B, sqrt(eps) E L^-1]`` ``(n, n + k)``, and, when
     ``weighted``, also to the whitened measurement error ``e = [sqrt(eps) L^-T B, I - eps S^-1] [z; v]``:
     one product for the draw and its weight. ``C`` ``(n, n)``, ``B = L^-1 G`` ``(k, n)``, ``E = C B^T``
-    ``(n, k)``, ``L^-1`` ``(k, k)``; returns ``(n, n + k)`` or ``(n + k, n + k)``."""
+    ``(n, k)``, ``L^-1`` ``(k, k)``; returns ``(n, n + k)`` or ``(n + k, n + k)``.
+
+    Both blocks share a factor: ``[A; e's map] = diag(C, I) + [-E; sqrt(eps) L^-T] [B, -sqrt(eps) L^-1]``."""
     n, k = C.shape[0], L_inv.shape[0]
     root = math.sqrt(eps)
-    A = np.empty((n + k if weighted else n, n + k))
-    np.subtract(C, E @ B, out=A[:n, :n])
-    np.multiply(root, E @ L_inv, out=A[:n, n:])
-    if weighted:
-        np.multiply(root, L_inv.T @ B, out=A[n:, :n])
-        np.subtract(np.eye(k), eps * (L_inv.T @ L_inv), out=A[n:, n:])  # I - eps S^-1
+    right = np.concatenate((B, -root * L_inv), axis=1)  # (k, n + k)
+    if not weighted:
+        A = -E @ right
+        A[:, :n] += C
+        return A
+    A = np.concatenate((-E, root * L_inv.T)) @ right
+    A[:n, :n] += C
+    A[n:, n:].flat[::k + 1] += 1.0  # I - eps S^-1
     return A
