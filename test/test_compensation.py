@@ -233,3 +233,26 @@ def test_model_average_options_and_degenerate_posteriors():
     # far from zero: the nominal model is out (no underflow warning), and the estimate is the compensated one
     probability, average_mean, _ = model_average(np.array([1.0, 2.0, 50.0]), cov, 2, SIGMA, 0.5)
     assert probability == 0.0 and np.array_equal(average_mean, [1.0, 2.0])
+
+
+def test_model_average_follows_every_step_and_set_moments():
+    """The average is kept for the posterior it was computed from: read between steps, and after the
+    cloud is moved in place of a step, it is the average of the current posterior."""
+    from gpf_nav.filters.model_averaging import model_average
+
+    base = constant_velocity()
+    f = GeometricProjectionPF(base, 200, seed=3)
+    f.initialize(np.array([0.0, 1.0]), np.diag([4.0, 1.0]))
+
+    def fresh():
+        return model_average(f.augmented_mean, f.augmented_covariance, 2, f.model.acceleration_std, 0.5)
+
+    for y in simulate(constant_velocity(), np.array([0.0, 1.0]), 8, 1.0, seed=2):
+        f.predict(1.0)
+        assert np.array_equal(f.mean, fresh()[1])  # a prediction: the pending noise is in the covariance
+        np.testing.assert_array_equal(f.covariance, fresh()[2])
+        f.update(y)
+        probability, mean, cov = fresh()
+        assert f.model_probabilities[0] == probability and np.array_equal(f.mean, mean)
+    f.set_moments(np.array([5.0, 0.0, 0.0]), np.diag([1.0, 1.0, 1e-4]))
+    assert np.array_equal(f.mean, fresh()[1]) and f.mean[0] == pytest.approx(5.0)

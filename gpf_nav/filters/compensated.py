@@ -40,6 +40,7 @@ class ModelErrorCompensated:
             raise ValueError(f"nominal_prior must lie in [0, 1), got {nominal_prior}")
         self.nominal_model = model
         self.nominal_prior = float(nominal_prior)
+        self._average_cache: tuple[np.ndarray, np.ndarray, tuple] | None = None
         if float(acceleration_std) == 0.0:
             return model
         return ModelErrorCompensation(model, time_constant, acceleration_std)
@@ -60,17 +61,30 @@ class ModelErrorCompensated:
             mean, cov = self.model.augment_prior(mean, np.asarray(cov, dtype=float))
         super().initialize(mean, cov, t0)
 
-    def _average(self) -> tuple[float, np.ndarray, np.ndarray]:
-        """``(probability of the nominal model, mean (n,), covariance (n, n))`` of the user's state."""
+    def _average(self) -> tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(probability of the nominal model, mean (n,), covariance (n, n), acceleration (p,), its
+        covariance (p, p))``, model-averaged; kept for the compensated posterior it was computed from (a
+        node reads the estimate, the acceleration and the probabilities of the same step)."""
         n = self.nominal_model.state_dim
         mean, cov = super().mean, super().covariance
+        cached = self._average_cache
+        if cached is not None and np.array_equal(cached[0], mean) and np.array_equal(cached[1], cov):
+            return cached[2]
+        a, A = mean[n:], cov[n:, n:]
         if not self.compensated:
-            return 0.0, mean[:n], cov[:n, :n]
-        return model_average(mean, cov, n, self.model.acceleration_std, self.nominal_prior)
+            average = (0.0, mean[:n], cov[:n, :n], a, A)
+        else:
+            probability, m, P = model_average(mean, cov, n, self.model.acceleration_std, self.nominal_prior)
+            if probability > 0.0:  # the nominal model's acceleration is zero
+                a, A = mixture_moments((probability, 1.0 - probability),
+                                       [(np.zeros_like(a), np.zeros_like(A)), (a, A)])
+            average = (probability, m, P, a, A)
+        self._average_cache = (np.array(mean), np.array(cov), average)
+        return average
 
     def _estimate(self) -> tuple[np.ndarray, np.ndarray]:
         """``(mean (n,), covariance (n, n))`` from one model average."""
-        return self._average()[1:]
+        return self._average()[1:3]
 
     @property
     def mean(self) -> np.ndarray:
@@ -106,21 +120,12 @@ class ModelErrorCompensated:
     def unmodelled_acceleration(self) -> np.ndarray:
         """Estimated unmodelled acceleration ``(p,)``, model-averaged (the nominal model's is zero);
         empty without compensation."""
-        return self._acceleration_average()[0]
+        return self._average()[3]
 
     @property
     def unmodelled_acceleration_covariance(self) -> np.ndarray:
         """Its covariance ``(p, p)``."""
-        return self._acceleration_average()[1]
-
-    def _acceleration_average(self) -> tuple[np.ndarray, np.ndarray]:
-        n = self.nominal_model.state_dim
-        mean, cov = self.augmented_mean[n:], self.augmented_covariance[n:, n:]
-        probabilities = self.model_probabilities
-        if probabilities is None:
-            return mean, cov
-        zero = (np.zeros_like(mean), np.zeros_like(cov))
-        return mixture_moments(probabilities, [zero, (mean, cov)])
+        return self._average()[4]
 
 
 class CompensatedEKF(ModelErrorCompensated, ExtendedKF):

@@ -41,7 +41,7 @@ def mixture_moments(weights, moments: list[tuple[np.ndarray, np.ndarray]]) -> tu
 
 
 def _nominal_hypothesis(mean: np.ndarray, cov: np.ndarray, n: int, sigma: float,
-                                    prior: float) -> tuple[float, np.ndarray, np.ndarray]:
+                        prior: float) -> tuple[float, np.ndarray, np.ndarray]:
     """``(pi_0, m_0 (n,), P_0 (n, n))``: the posterior probability of ``a = 0`` and the posterior of the
     user's state under it, from the compensated posterior ``N(mean (n + p,), cov (n + p, n + p))`` (the
     user's ``n`` states first), the prior std ``sigma`` of each of the ``p`` components of ``a`` and the
@@ -59,7 +59,7 @@ def _nominal_hypothesis(mean: np.ndarray, cov: np.ndarray, n: int, sigma: float,
     p = L.shape[0]
     log_bayes = (-0.5 * float(white_a @ white_a) - float(np.log(L.diagonal()).sum())
                  + p * math.log(sigma))
-    log_odds = log_bayes + math.log(prior) - math.log1p(-prior) if prior < 1.0 else math.inf
+    log_odds = log_bayes + math.log(prior) - math.log1p(-prior)  # prior in (0, 1)
     probability = 1.0 / (1.0 + math.exp(-log_odds)) if log_odds > -700.0 else 0.0
     m_0 = m_x - white_xa.T @ white_a
     P_0 = P_xx - white_xa.T @ white_xa
