@@ -462,6 +462,22 @@ def test_unusable_input_is_refused_in_one_line_with_status_2(tmp_path, recorded)
     assert r.returncode == 2 and "no such bag" in r.stderr
 
 
+def test_simulator_disturbance_parameter_is_the_scenarios():
+    """``scenario.disturbance`` reaches the simulator's truth as the scenario's hidden acceleration: the
+    same truth as ``generate`` with it, and a different one from the undisturbed run."""
+    from gpf_nav.scenario import ScenarioConfig, generate
+
+    push = [0.0, 0.06, -0.08]
+    config, scenario = scenario_from_parameters(_sim_params(**{"scenario.disturbance": push}))
+    assert config.disturbance == tuple(push)
+    expected = generate(ScenarioConfig(duration=SIM_SECONDS, disturbance=tuple(push)), 0)
+    np.testing.assert_array_equal(scenario.truth, expected.truth)
+    np.testing.assert_array_equal(scenario.specific_force, expected.specific_force)  # the IMU does not sense it
+    undisturbed = scenario_from_parameters(_sim_params())[1]
+    drift = np.linalg.norm(scenario.truth[-1, :3] - undisturbed.truth[-1, :3])
+    assert drift > 0.5 * 0.1 * SIM_SECONDS ** 2 * 0.5  # about a t^2 / 2 of 0.1 m/s^2
+
+
 def test_parameters_from_files_like_the_node(tmp_path):
     f = tmp_path / "p.yaml"
     f.write_text("/**:\n  ros__parameters:\n    n_particles: 50\n    use_sim_time: true\n"

@@ -111,6 +111,7 @@ SCENARIO_DESCRIPTIONS = {
     "measurement_noise_scale": "Multiplies both measurement noise stds [-].",
     "dropout_probability": "Probability a whole measurement is lost [-].",
     "thrust": "Retrograde specific force magnitude [m/s^2]; 0 = coasting.",
+    "disturbance": "Constant acceleration on the truth in world_frame that the IMU does not sense, like a gravity-field error [m/s^2].",
 }
 
 
