@@ -121,7 +121,8 @@ def filter_options(p: dict) -> dict:
                 weighting=p["weighting"], metric=p["metric"], regularization=p["regularization"],
                 unmodelled_acceleration_std=p["unmodelled_acceleration_std"],
                 unmodelled_acceleration_time=p["unmodelled_acceleration_time"],
-                nominal_prior=p["nominal_prior"], kernel_bandwidth=p["kernel_bandwidth"], model_switch_time=p["model_switch_time"],
+                nominal_prior=p["nominal_prior"], kernel_bandwidth=p["kernel_bandwidth"],
+                model_switch_time=p["model_switch_time"],
                 collapse_steps=p["collapse_steps"], resampling=p["resampling"],
                 ess_threshold=p["ess_threshold"], compute_costate=p["compute_costate"],
                 ukf_alpha=p["ukf_alpha"], ukf_beta=p["ukf_beta"], ukf_kappa=p["ukf_kappa"])
