@@ -152,8 +152,8 @@ def test_default_gpf_converges_to_the_kalman_posterior_of_the_augmented_model():
             errors.append(np.abs(f.augmented_mean - exact_mean) / sd)
         return np.sqrt(np.mean(np.square(errors)))
 
-    small, large = error(300), error(4800)
-    assert large < small / 2.0 and large < 0.05
+    small, large = error(300), error(19200)  # 64 times the particles: the Monte Carlo error 1/8
+    assert large < small / 3.0 and large < 0.02
 
 
 def _lunar_states(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -180,20 +180,28 @@ def test_lunar_frame_is_radial_along_track_cross_track():
     np.testing.assert_allclose(frame[-1], np.eye(3))  # a non-finite state: the world's axes
 
 
-def test_acceleration_fixed_in_the_local_frame_is_carried_with_it():
-    """A radial 0.1 m/s^2 stays radial as the orbit turns: after a quarter orbit the compensation state
-    has turned with the radius, not stayed on the world axis it started on (decay aside)."""
+def test_acceleration_in_the_local_frame_keeps_its_direction_in_it():
+    """A radial 0.1 m/s^2 held as local coordinates: the state stays (0.1, 0, 0) (decay aside) for a
+    quarter orbit, each step pushes the orbit along the radius of the step's start, and it is reported on
+    the world's axes along the radius of the end, not the one it started on."""
     base = LunarDescentModel()
     model = ModelErrorCompensation(base, time_constant=1e6, acceleration_std=0.1)
     x0 = _lunar_states(np.random.default_rng(4), 4)
+    x = np.hstack([x0, np.tile([0.1, 0.0, 0.0], (4, 1))])
+    G, _ = model._coupling(2.0)
     radial = x0[:, :3] / np.linalg.norm(x0[:, :3], axis=1, keepdims=True)
-    x = np.hstack([x0, 0.1 * radial])
+    pushed = model.transition(x, 2.0)[:, :6] - base.transition(x0, 2.0)
+    np.testing.assert_allclose(pushed, 0.1 * np.hstack([G[0, 0] * radial, G[3, 0] * radial]), rtol=1e-6, atol=1e-12)
     for _ in range(900):
         x = model.transition(x, 2.0)
-    a, r = x[:, 6:], x[:, :3]
     decay = np.exp(-1800.0 / 1e6)
-    np.testing.assert_allclose(a, 0.1 * decay * r / np.linalg.norm(r, axis=1, keepdims=True), atol=1e-12)
-    assert np.all(np.einsum("ni,ni->n", radial, r / np.linalg.norm(r, axis=1, keepdims=True)) < 0.9)
+    np.testing.assert_allclose(x[:, 6:], np.tile([0.1 * decay, 0.0, 0.0], (4, 1)), rtol=1e-12, atol=1e-15)
+    end = x[:, :3] / np.linalg.norm(x[:, :3], axis=1, keepdims=True)
+    for state, r in zip(x, end):
+        a, cov = model.world_acceleration(state[:6], state[6:], np.diag([1.0, 2.0, 3.0]))
+        np.testing.assert_allclose(a, 0.1 * decay * r, atol=1e-12)
+        assert np.trace(cov) == pytest.approx(6.0) and cov @ r == pytest.approx(r)  # turned, not scaled
+    assert np.all(np.einsum("ni,ni->n", radial, end) < 0.9)  # the orbit did turn
 
 
 def test_framed_transition_jacobian_matches_finite_differences():
@@ -206,12 +214,11 @@ def test_framed_transition_jacobian_matches_finite_differences():
         e = np.zeros(9)
         e[j] = step[j]
         numeric[:, j] = (model.transition(x + e, 2.0)[0] - model.transition(x - e, 2.0)[0]) / (2 * step[j])
-    np.testing.assert_allclose(J[:6], numeric[:6], rtol=1e-5, atol=1e-7)
-    # the frame's own dependence on the state is left out of J by design: how a turns with x (order
-    # dt |a| / |v| per m/s, |a| / |r| per m), and with a itself (a changes the velocity, which turns it)
-    np.testing.assert_allclose(J[6:, :6], numeric[6:, :6], atol=1e-7)
-    np.testing.assert_allclose(J[6:, 6:], numeric[6:, 6:], atol=2e-4)
-    assert not np.allclose(J[6:, 6:], np.eye(3) * J[6, 6], atol=1e-4)  # the turn itself is in J
+    # the frame's dependence on the velocity (how the along-track push turns with it) is in J
+    np.testing.assert_allclose(J, numeric, rtol=1e-5, atol=1e-7)  # (the base Jacobian is a Taylor series)
+    frozen = np.array(J)
+    frozen[:6, :6] = LunarDescentModel().transition_jacobian(x[:, :6], 2.0)[0]
+    assert not np.allclose(frozen, numeric, rtol=1e-5, atol=1e-7)
 
 
 def test_model_average_options_and_degenerate_posteriors():

@@ -78,13 +78,14 @@ class ModelErrorCompensated:
             if probability > 0.0:  # the nominal model's acceleration is zero
                 a, A = mixture_moments((probability, 1.0 - probability),
                                        [(np.zeros_like(a), np.zeros_like(A)), (a, A)])
-            average = (probability, m, P, a, A)
+            average = (probability, m, P, *self.model.world_acceleration(m, a, A))
         self._average_cache = (np.array(mean), np.array(cov), average)
         return average
 
     def _estimate(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(mean (n,), covariance (n, n))`` from one model average."""
-        return self._average()[1:3]
+        """``(mean (n + p,), covariance)`` of the compensated posterior: a recovery re-initialises the whole
+        state from it (:meth:`initialize` takes an augmented prior as it is)."""
+        return super().mean, super().covariance
 
     @property
     def mean(self) -> np.ndarray:
@@ -108,7 +109,8 @@ class ModelErrorCompensated:
     @property
     def augmented_mean(self) -> np.ndarray:
         """Compensated posterior mean ``(n + p,)`` of the whole state (the user's state, then the
-        unmodelled acceleration)."""
+        unmodelled acceleration in the model's local frame when it declares one,
+        :meth:`~gpf_nav.models.base.StateSpaceModel.compensation_frame`)."""
         return super().mean
 
     @property
@@ -118,8 +120,8 @@ class ModelErrorCompensated:
 
     @property
     def unmodelled_acceleration(self) -> np.ndarray:
-        """Estimated unmodelled acceleration ``(p,)``, model-averaged (the nominal model's is zero);
-        empty without compensation."""
+        """Estimated unmodelled acceleration ``(p,)`` on the state's own axes (the world's), model-averaged
+        (the nominal model's is zero); empty without compensation."""
         return self._average()[3]
 
     @property

@@ -8,21 +8,21 @@ model without velocities, as an extra drift on every state) and follow a first-o
 
 ``sigma`` is the stationary standard deviation of the unmodelled acceleration and ``tau`` its correlation
 time. When the base model declares a local frame (:meth:`StateSpaceModel.compensation_frame`, e.g. an
-orbit's radial / along-track / cross-track axes), ``a`` is carried with that frame: between steps it turns
-as the frame turns, so a force that keeps its direction in the frame (a gravity-field error is radial,
-drag and thrust are along-track) is a constant to the compensation, not a rotating vector it must keep
-re-learning. Nothing here knows what the error is (a gravity scale, a thrust, drag or a mis-modelled
-field are all "an acceleration the nominal drift does not have"); the filter estimates ``a`` from the
+orbit's radial / along-track / cross-track axes), ``a`` holds the coordinates of the acceleration in that
+frame, taken at each particle's state: a force that keeps its direction in the frame (a gravity-field
+error is radial, drag and thrust are along-track) is a constant to the compensation, not a rotating vector
+it must keep re-learning. Nothing here knows what the error is (a gravity scale, a thrust, drag or a
+mis-modelled field are all "an acceleration the nominal drift does not have"); the filter estimates ``a`` from the
 measurements.
 
-Over a step, ``a`` enters the base transition through the exact response of a double integrator (position
-``tau (dt - tau (1 - e))``, velocity ``tau (1 - e)`` per unit ``a``, ``e = exp(-dt / tau)``); the process
-noise is the base ``Q(dt)`` plus the exact Gauss-Markov covariance propagated through the same kinematic
-chain (Van Loan's matrix exponential), cached per ``dt``. The noise of ``a`` is isotropic, so the frame's
-turn over one step (a few milliradians) is left out of it; the EKF's Jacobian keeps the turn of ``a`` but
-not the frame's own dependence on ``x`` (a term of order ``|a| / |r|``). ``drift`` gives ``a``'s decay only
-(the frame's turn is a property of the step, not of the instant; only the GPF's ``increment`` reference
-reads ``drift``, through ``H``, which does not see ``a``).
+Over a step, ``a`` (turned to the state's own axes by the frame at the step's start) enters the base
+transition through the exact response of a double integrator (position ``tau (dt - tau (1 - e))``,
+velocity ``tau (1 - e)`` per unit ``a``, ``e = exp(-dt / tau)``); the process noise is the base ``Q(dt)``
+plus the exact Gauss-Markov covariance propagated through the same kinematic chain (Van Loan's matrix
+exponential), cached per ``dt``. The noise of ``a`` is isotropic, so it is the same in any frame, and the
+frame's turn over one step (a few milliradians) is left out of it. The transition's Jacobian includes the
+frame's dependence on the state, by central differences of the frame (a model gives its frame, not the
+frame's derivative).
 """
 from __future__ import annotations
 
@@ -34,6 +34,8 @@ from scipy.linalg import expm
 
 from gpf_nav.models.base import StateSpaceModel
 
+FRAME_STEP = 1e-6
+"""Relative step of the central differences of a local frame (:meth:`ModelErrorCompensation.transition_jacobian`)."""
 MAX_GAP = 100.0
 """Longest interval, in correlation times, over which the compensation noise is integrated; a longer
 one gets the noise of this one (the compensation state has long forgotten its value by then)."""
@@ -48,7 +50,8 @@ class ModelErrorCompensation(StateSpaceModel):
         acceleration_std: its stationary standard deviation ``sigma``, state units per s^2 (m/s^2).
 
     Attributes:
-        compensation_index: indices of the ``a`` states in the augmented state.
+        compensation_index: indices of the ``a`` states in the augmented state (coordinates in the base
+            model's local frame when it declares one: :meth:`world_acceleration` turns them back).
         acceleration_of: index ``(p,)`` of the base component each ``a`` drives (a velocity, or every
             state when the base declares no velocities).
     """
@@ -114,7 +117,8 @@ class ModelErrorCompensation(StateSpaceModel):
         xb, a = self._split(x)
         out = np.empty_like(x, dtype=float)
         out[:, :self._n] = self.base.drift(xb, t, u)
-        out[:, self.acceleration_of] += a
+        frame = self._frame(xb.T)
+        out[:, self.acceleration_of] += a if frame is None else np.einsum("ijn,nj->ni", frame, a)
         out[:, self._n:] = -a / self.time_constant
         return out
 
@@ -128,46 +132,57 @@ class ModelErrorCompensation(StateSpaceModel):
         out = np.empty((self.state_dim, x.shape[0]))
         moved = out[:self._n]
         moved[...] = self.base.transition(xt[:self._n].T, dt, t, u).T
+        frame = self._frame(xt[:self._n])
+        push = a if frame is None else np.einsum("ijn,jn->in", frame, a)  # on the state's own axes
         # G has one velocity (and one position) entry per column: add them without a matrix product
-        moved[self._driven] += a * G[self.acceleration_of[0], 0]
+        moved[self._driven] += push * G[self.acceleration_of[0], 0]
         if self._integrated_into is not None:
-            moved[self._integrated] += a * G[self._integrated_into[0], 0]
-        frames = self._frames(xt[:self._n], moved)
-        if frames is None:
-            np.multiply(a, decay, out=out[self._n:])
-        else:  # a turned with the frame, end start^T a, without forming the product of the frames
-            start, end = frames
-            local = np.einsum("ijn,in->jn", start, a * decay)
-            np.einsum("ijn,jn->in", end, local, out=out[self._n:])
+            moved[self._integrated] += push * G[self._integrated_into[0], 0]
+        np.multiply(a, decay, out=out[self._n:])
         return out.T
 
     def transition_jacobian(self, x, dt, t=0.0, u=None):
-        xb, _ = self._split(x)
+        xb, a = self._split(x)
         G, decay = self._coupling(dt)
         J = np.zeros((x.shape[0], self.state_dim, self.state_dim))
         J[:, :self._n, :self._n] = self.base.transition_jacobian(xb, dt, t, u)
-        J[:, :self._n, self._n:] = G
-        turn = self._turn(xb, self.base.transition(xb, dt, t, u)) if self._framed else None
-        J[:, self._n:, self._n:] = decay * (np.eye(self._p) if turn is None else turn)
+        frame = self._frame(xb.T)
+        if frame is None:
+            J[:, :self._n, self._n:] = G
+        else:
+            J[:, :self._n, self._n:] = np.einsum("ij,jkn->nik", G, frame)
+            J[:, :self._n, :self._n] += np.einsum("ij,njl->nil", G, self._push_derivative(xb, a))
+        J[:, self._n:, self._n:] = decay * np.eye(self._p)
         return J
 
-    def _frames(self, before: np.ndarray, after: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        """The base model's local frames ``(p, p, N)`` (particle last) at the states ``before`` and
-        ``after`` ``(n, N)``, from one call on both, or None without a local frame."""
+    def _frame(self, x: np.ndarray) -> np.ndarray | None:
+        """The base model's local frames ``(p, p, N)`` (particle last) at the base states ``x`` ``(n, N)``,
+        or None without a local frame."""
         if not self._framed:
             return None
-        frames = self.base.compensation_frame(np.concatenate((before, after), axis=1).T)
-        if frames is None:
-            return None
-        frames = frames.transpose(1, 2, 0)  # the particle-last array the model built (a view)
-        count = before.shape[1]
-        return frames[..., :count], frames[..., count:]
+        frame = self.base.compensation_frame(x.T)
+        return None if frame is None else frame.transpose(1, 2, 0)  # the particle-last array the model built
 
-    def _turn(self, before: np.ndarray, after: np.ndarray) -> np.ndarray | None:
-        """Rotation ``(N, p, p)`` carrying a vector fixed in the base model's local frame from the states
-        ``before`` to ``after`` ``(N, n)``, or None without a local frame."""
-        frames = self._frames(before.T, after.T)
-        return None if frames is None else np.einsum("ikn,jkn->nij", frames[1], frames[0])
+    def _push_derivative(self, x: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """``d(F(x) a) / dx`` ``(N, p, n)`` of the pushed acceleration at base states ``x`` ``(N, n)`` with
+        ``a`` ``(N, p)`` held, by central differences of the frame ``F`` (one call on ``2 n N`` states)."""
+        count, n = x.shape
+        steps = FRAME_STEP * np.maximum(np.abs(x), 1.0)  # (N, n)
+        shifts = np.einsum("nj,jk->jnk", steps, np.eye(n))  # (n, N, n): component j of particle i moved
+        states = np.concatenate((x + shifts, x - shifts)).reshape(2 * n * count, n)
+        frames = self.base.compensation_frame(states).reshape(2, n, count, self._p, self._p)
+        pushed = np.einsum("sjnik,nk->sjni", frames, a)  # (2, n, N, p)
+        return ((pushed[0] - pushed[1]) / (2.0 * steps.T[..., None])).transpose(1, 2, 0)
+
+    def world_acceleration(self, x: np.ndarray, a: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """An estimated acceleration ``a`` ``(p,)`` with covariance ``cov`` ``(p, p)`` on the state's own
+        axes (the world's, for the lunar model): turned by the local frame at the base state ``x``
+        ``(n,)``, as it is without one."""
+        frame = self._frame(np.asarray(x, dtype=float)[:, None])
+        if frame is None:
+            return a, cov
+        F = frame[..., 0]
+        return F @ a, F @ cov @ F.T
 
     @property
     def time_varying_noise(self) -> bool:

@@ -142,7 +142,10 @@ class LunarDescentModel(StateSpaceModel):
         # are then positive and the states finite (a non-finite one fails the test): a frame of finite axes
         if size.min() > 1e-12 * max(math.sqrt(speed2.max()), 1.0):
             normal /= size
-            _cross(normal, radial, out=along)
+            # normal x radial = (v - (radial . v) radial) / size: the velocity less its radial part
+            np.multiply(radial, np.einsum("in,in->n", radial, v), out=along)
+            np.subtract(v, along, out=along)
+            along /= size
         else:
             _degenerate_frames(frame, size, speed2)
         return frame.transpose(2, 0, 1)
