@@ -292,7 +292,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         if resampling:
             self._moment_target = (self._x, mean, cov)
             return
-        matched = map_moments(d[n:], current, mean, cov)
+        matched = map_moments(d[n:], current, mean, cov, symmetric=True)
         if matched is not None:
             self._x = matched
 
@@ -304,9 +304,9 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
             return
         weighted, mean, cov = self._moment_target
         self._moment_target = None
-        matched = match_moments(self._x, None, mean, cov)  # the resampled cloud's weights are equal
+        matched = match_moments(self._x, None, mean, cov, symmetric=True)  # equal weights after resampling
         if matched is None:
-            matched = match_moments(weighted, self._weights, mean, cov)
+            matched = match_moments(weighted, self._weights, mean, cov, symmetric=True)
             matched = None if matched is None else matched[:, ancestors]
         if matched is not None:
             self._x = matched

@@ -43,7 +43,8 @@ def default_bandwidth(n_particles: int, dim: int) -> float:
 
 def weighted_moments(x: np.ndarray, weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(mean (n,), deviations x - mean (n, N), covariance (n, n))`` of the cloud ``x`` ``(n, N)`` with
-    normalised ``weights`` ``(N,)``, or equal weights when None (one pass less)."""
+    normalised ``weights`` ``(N,)``, or equal weights when None (one pass less). The covariance is
+    exactly symmetric: it is formed as ``A A^T`` (``A = d sqrt(w)``), which numpy computes as such."""
     if weights is None:
         share = 1.0 / x.shape[1]
         mean = x @ np.full(x.shape[1], share)  # a product: cheaper than a mean along the rows
@@ -51,7 +52,8 @@ def weighted_moments(x: np.ndarray, weights: np.ndarray | None) -> tuple[np.ndar
         return mean, d, (d @ d.T) * share
     mean = x @ weights
     d = x - mean[:, None]
-    return mean, d, (d * weights) @ d.T
+    root = d * np.sqrt(weights)
+    return mean, d, root @ root.T
 
 
 def paired_moments(x: np.ndarray, weights: np.ndarray, n: int
@@ -61,8 +63,9 @@ def paired_moments(x: np.ndarray, weights: np.ndarray, n: int
     ``(means (2 n,), deviations (2 n, N), covariance of the first (n, n), of the second (n, n))``."""
     mean = x @ weights
     d = x - mean[:, None]
-    dw = d * weights
-    return mean, d, dw[:n] @ d[:n].T, dw[n:] @ d[n:].T
+    root = d * np.sqrt(weights)
+    first, second = root[:n], root[n:]
+    return mean, d, first @ first.T, second @ second.T
 
 
 def shrink(x: np.ndarray, weights: np.ndarray, bandwidth: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -72,29 +75,32 @@ def shrink(x: np.ndarray, weights: np.ndarray, bandwidth: float) -> tuple[np.nda
     a = math.sqrt(1.0 - bandwidth ** 2)
     centres = a * x
     centres += ((1.0 - a) * mean)[:, None]
-    return mean, centres, bandwidth ** 2 * 0.5 * (cov + cov.T)
+    return mean, centres, bandwidth ** 2 * cov
 
 
 def match_moments(x: np.ndarray, weights: np.ndarray | None, mean: np.ndarray,
-                  cov: np.ndarray) -> np.ndarray | None:
+                  cov: np.ndarray, symmetric: bool = False) -> np.ndarray | None:
     """The cloud ``x`` ``(n, N)`` moved by an affine map so that its weighted mean and covariance (equal
     weights when ``weights`` is None) are ``mean`` ``(n,)`` and ``cov`` ``(n, n)`` exactly:
     ``mean + L_cov L_x^-1 (x - m_x)``. None when the cloud's covariance is singular (nothing to map from)
-    or ``cov`` is not positive definite.
+    or ``cov`` is not positive definite. ``symmetric`` says ``cov`` is exactly symmetric (else its
+    symmetric part is used).
 
     The map of ``T x + b``, for ``T`` lower triangular with a positive diagonal (such as this map), is
     the map of ``x`` (the Cholesky factor of ``T P T^T`` is ``T L_P``): mapping a cloud, resampling it
     and mapping the copies moves them where mapping the resampled copies once does."""
     _, d, current = weighted_moments(x, weights)
-    return map_moments(d, current, mean, cov)
+    return map_moments(d, current, mean, cov, symmetric)
 
 
-def map_moments(d: np.ndarray, current: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> np.ndarray | None:
+def map_moments(d: np.ndarray, current: np.ndarray, mean: np.ndarray, cov: np.ndarray,
+                symmetric: bool = False) -> np.ndarray | None:
     """:func:`match_moments` of a cloud given by its deviations from its mean ``d`` ``(n, N)`` and its
-    covariance ``current`` ``(n, n)``: ``mean + L_cov L_current^-1 d``, or None."""
+    exactly symmetric covariance ``current`` ``(n, n)`` (as :func:`weighted_moments` gives it):
+    ``mean + L_cov L_current^-1 d``, or None."""
     if not np.isfinite(current).all():
         return None
-    source, target = cholesky_or_none(current), cholesky_or_none(cov)
+    source, target = cholesky_or_none(current, symmetric=True), cholesky_or_none(cov, symmetric)
     if source is None or target is None:
         return None
     out = (target @ triangular_inverse(source)) @ d
