@@ -129,7 +129,12 @@ class LunarDescentModel(StateSpaceModel):
         errors (radial), drag and thrust (along-track) keep their direction. Where the orbit plane is
         undefined (``r`` parallel to ``v``) the cross-track axis is any one normal to ``r``; at the
         Moon's centre, or for a non-finite ``x``, the frame is the world's. Built particle-last (rows of
-        ``N``) and returned as the ``(N, 3, 3)`` view."""
+        ``N``) and returned as the ``(N, 3, 3)`` view; one state is computed in Python floats (the frame of a
+        particle filter's estimate, :mod:`gpf_nav.models.compensation`)."""
+        if x.shape[0] == 1:
+            frame = _point_frame(x[0])
+            if frame is not None:
+                return frame
         xt = x.T
         r, v = xt[:3], xt[3:6]
         frame = np.empty((3, 3, x.shape[0]))  # (component, axis, particle)
@@ -221,6 +226,23 @@ def _as_input(u):
         return None
     u = np.asarray(u, dtype=float)
     return None if not np.any(u) else u
+
+
+def _point_frame(x: np.ndarray) -> np.ndarray | None:
+    """:meth:`LunarDescentModel.compensation_frame` ``(1, 3, 3)`` of one state ``x`` ``(6,)`` in Python floats
+    (the same operations; at one point numpy's calls cost more than the arithmetic), or None where the
+    orbit plane is undefined or the state is not finite (the array path handles those)."""
+    r0, r1, r2, v0, v1, v2 = x[:6].tolist()
+    size_r = max(math.sqrt(r0 * r0 + r1 * r1 + r2 * r2), _MIN_RANGE)
+    a0, a1, a2 = r0 / size_r, r1 / size_r, r2 / size_r  # radial
+    n0, n1, n2 = a1 * v2 - a2 * v1, a2 * v0 - a0 * v2, a0 * v1 - a1 * v0
+    size = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    if not size > 1e-12 * max(math.sqrt(v0 * v0 + v1 * v1 + v2 * v2), 1.0):  # (NaN fails too)
+        return None
+    n0, n1, n2 = n0 / size, n1 / size, n2 / size
+    along = a0 * v0 + a1 * v1 + a2 * v2
+    t0, t1, t2 = (v0 - along * a0) / size, (v1 - along * a1) / size, (v2 - along * a2) / size
+    return np.array([[[a0, t0, n0], [a1, t1, n1], [a2, t2, n2]]])
 
 
 def _degenerate_frames(frame: np.ndarray, size: np.ndarray, speed2: np.ndarray) -> None:
