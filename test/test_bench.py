@@ -16,9 +16,13 @@ def test_bench_reports_every_filter_and_the_ratio_of_the_same_run(capsys):
     assert names == [("GPF", 200), ("GPF-paper", 200), ("GPF-mm", 200), ("SPF", 200), ("EKF", None), ("UKF", None),
                      ("EnKF", 500)]
     times = {name: r["us_per_step"] for name, r in zip(names, report["results"])}
+    blocks = {name: np.array(r["blocks_us"]) for name, r in zip(names, report["results"])}
     assert all(np.isfinite(t) and t > 0 for t in times.values())
-    assert report["gpf_over_spf"]["200"] == pytest.approx(times[("GPF", 200)] / times[("SPF", 200)])
-    assert report["gpf_over_paper_gpf"]["200"] == pytest.approx(times[("GPF", 200)] / times[("GPF-paper", 200)])
+    assert all(times[name] == pytest.approx(np.median(b)) and b.size == 1 for name, b in blocks.items())
+    # the ratios are the medians over rounds of the ratio of the two filters' blocks of a round
+    assert report["gpf_over_spf"]["200"] == pytest.approx(np.median(blocks[("GPF", 200)] / blocks[("SPF", 200)]))
+    assert report["gpf_over_paper_gpf"]["200"] == pytest.approx(
+        np.median(blocks[("GPF", 200)] / blocks[("GPF-paper", 200)]))
     expected = "retain_freed_memory" if allocator.retained else "default"
     assert report["machine"]["allocator"] == expected
     text = bench.format_table(report)
@@ -49,3 +53,42 @@ def test_bench_steps_follow_the_measurements_in_order():
     with pytest.raises(ValueError, match="measurements"):
         bench.time_filter(lambda m, seed: GeometricProjectionPF(m, 200, seed=seed), scenario, model,
                           steps=10, repeats=3)
+
+
+class _Recorder:
+    """A filter that records which measurement each of its updates got, and when (a shared counter)."""
+
+    clock = 0
+
+    def __init__(self, log):
+        self.log = log
+
+    def initialize(self, mean, cov):
+        pass
+
+    def predict(self, dt):
+        pass
+
+    def update(self, y):
+        _Recorder.clock += 1
+        self.log.append((_Recorder.clock, float(y[0])))
+
+
+def test_filters_of_a_group_are_timed_in_turn_each_on_its_own_measurements_in_order():
+    from dataclasses import replace
+
+    from gpf_nav.scenario import ScenarioConfig, filter_model, generate
+
+    config = replace(ScenarioConfig(), duration=2.0 * (bench.WARMUP + 3 * 4 + 1))
+    scenario = generate(config, 0)
+    logs = [[], [], []]
+    makers = [lambda model, seed, log=log: _Recorder(log) for log in logs]
+    blocks = bench.time_filters(makers, scenario, filter_model(config), steps=4, repeats=3)
+    assert [len(b) for b in blocks] == [3, 3, 3] and all(t >= 0.0 for b in blocks for t in b)
+    ranges = scenario.measurements[:bench.WARMUP + 12, 0].tolist()
+    for log in logs:  # every filter: each measurement once, in order
+        assert [y for _, y in log] == ranges
+    # round r starts with filter r (mod 3): the first timed update of each filter in each round, in time order
+    for round_ in range(3):
+        starts = [log[bench.WARMUP + 4 * round_][0] for log in logs]
+        assert int(np.argmin(starts)) == round_

@@ -2,12 +2,15 @@
 
 "GPF" is the default (navigation-grade) configuration, "GPF-paper" the paper's (:data:`PAPER_GPF`),
 "GPF-mm" the multiple-model option (two GPFs of N particles each).
-Each filter runs on the same seeded lunar-descent measurements. A step is timed over a block of
-steps; the reported figure is the median block time per step over ``--repeats`` blocks, after a warm-up.
-The GPF/SPF ratio compares figures measured in the same run. ``gpf-nav bench`` runs with the heap
-tuning of :mod:`gpf_nav.allocator` (the report says whether it was applied); ``python -m
-gpf_nav.experiments.bench`` runs with the C library's default allocator, for comparison.
-``--node`` runs the ROS node-latency benchmark instead (``gpf_nav.ros.latency``).
+Each filter runs on the same seeded lunar-descent measurements, each step on the next measurement. A step
+is timed over a block of steps. The filters of one group (the particle filters of one N; the Gaussian
+filters and the EnKF) run their blocks in turn, round after round, the order rotating each round, so a
+machine whose speed drifts (other work, CPU frequency) moves every filter of the group alike. The
+reported figure is a filter's median block time per step over ``--repeats`` rounds, after a warm-up; the
+GPF/SPF and GPF/GPF-paper ratios are the medians over the rounds of the ratio of the two blocks of a
+round. ``gpf-nav bench`` runs with the heap tuning of :mod:`gpf_nav.allocator` (the report says whether
+it was applied); ``python -m gpf_nav.experiments.bench`` runs with the C library's default allocator, for
+comparison. ``--node`` runs the ROS node-latency benchmark instead (``gpf_nav.ros.latency``).
 """
 from __future__ import annotations
 
@@ -30,19 +33,20 @@ PAPER_GPF = {"metric": "euclidean", "weighting": "likelihood", "unmodelled_accel
 ENSEMBLE_SIZE = 500
 
 
-def _cases(particle_counts) -> list[tuple[str, int | None, object]]:
-    """``(filter name, N or None, constructor(model, seed))`` in table order."""
-    cases = []
+def _groups(particle_counts) -> list[list[tuple[str, int | None, object]]]:
+    """Groups timed together, each a list of ``(filter name, N or None, constructor(model, seed))`` in table
+    order: the particle filters of each N, then the Gaussian filters and the EnKF."""
+    groups = []
     for n in particle_counts:
-        cases.append(("GPF", n, lambda model, seed, n=n: GeometricProjectionPF(model, n, seed=seed)))
-        cases.append(("GPF-paper", n, lambda model, seed, n=n: GeometricProjectionPF(model, n, seed=seed,
-                                                                                 **PAPER_GPF)))
-        cases.append(("GPF-mm", n, lambda model, seed, n=n: MultipleModelGPF(model, n, seed=seed)))
-        cases.append(("SPF", n, lambda model, seed, n=n: BootstrapPF(model, n, seed=seed)))
-    cases.append(("EKF", None, lambda model, seed: ExtendedKF(model, seed=seed)))
-    cases.append(("UKF", None, lambda model, seed: UnscentedKF(model, seed=seed)))
-    cases.append(("EnKF", ENSEMBLE_SIZE, lambda model, seed: EnsembleKF(model, ENSEMBLE_SIZE, seed=seed)))
-    return cases
+        groups.append([
+            ("GPF", n, lambda model, seed, n=n: GeometricProjectionPF(model, n, seed=seed)),
+            ("GPF-paper", n, lambda model, seed, n=n: GeometricProjectionPF(model, n, seed=seed, **PAPER_GPF)),
+            ("GPF-mm", n, lambda model, seed, n=n: MultipleModelGPF(model, n, seed=seed)),
+            ("SPF", n, lambda model, seed, n=n: BootstrapPF(model, n, seed=seed))])
+    groups.append([("EKF", None, lambda model, seed: ExtendedKF(model, seed=seed)),
+                   ("UKF", None, lambda model, seed: UnscentedKF(model, seed=seed)),
+                   ("EnKF", ENSEMBLE_SIZE, lambda model, seed: EnsembleKF(model, ENSEMBLE_SIZE, seed=seed))])
+    return groups
 
 
 WARMUP = 3
@@ -51,46 +55,60 @@ STEPS = 50
 """Steps per timed block (5 above N = 10 000)."""
 
 
-def time_filter(make, scenario, model, steps: int, repeats: int, warmup: int = WARMUP) -> float:
-    """Median seconds per predict+update step over ``repeats`` blocks of ``steps`` steps, each step on
-    the scenario's next measurement (so the filter runs in its normal regime, tracking the truth)."""
+def time_filters(makers, scenario, model, steps: int, repeats: int, warmup: int = WARMUP) -> list[list[float]]:
+    """Seconds per predict+update step of each filter made by ``makers`` (``constructor(model, seed)``), one
+    list of ``repeats`` block times each: the filters run blocks of ``steps`` steps in turn, round after
+    round, the first of a round rotating. Each filter's step takes the scenario's next measurement (so it
+    runs in its normal regime, tracking the truth)."""
     if warmup + repeats * steps > len(scenario.measurements):
         raise ValueError(f"the scenario has {len(scenario.measurements)} measurements, the timing needs "
                          f"{warmup + repeats * steps}")
-    f = make(model, 0)
-    f.initialize(scenario.prior_mean, scenario.prior_cov)
-    dt = scenario.config.dt
-    ys = scenario.measurements
-    k = 0
-    for _ in range(warmup):
-        f.predict(dt)
-        f.update(ys[k])
-        k += 1
-    blocks = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        for _ in range(steps):
+    dt, ys = scenario.config.dt, scenario.measurements
+    filters = [make(model, 0) for make in makers]
+    for f in filters:
+        f.initialize(scenario.prior_mean, scenario.prior_cov)
+        for k in range(warmup):
             f.predict(dt)
             f.update(ys[k])
-            k += 1
-        blocks.append((time.perf_counter() - start) / steps)
-    return float(np.median(blocks))
+    blocks: list[list[float]] = [[] for _ in filters]
+    count = len(filters)
+    for round_ in range(repeats):
+        first = warmup + round_ * steps
+        for i in [(round_ + j) % count for j in range(count)]:
+            f = filters[i]
+            start = time.perf_counter()
+            for k in range(first, first + steps):
+                f.predict(dt)
+                f.update(ys[k])
+            blocks[i].append((time.perf_counter() - start) / steps)
+    return blocks
 
 
-def run(particle_counts=PARTICLE_COUNTS, repeats: int = 5, seed: int = 0) -> dict:
-    """Benchmark every filter; returns ``{"results": [...], "ratios": {N: GPF/SPF}, "machine": ...}``."""
+def time_filter(make, scenario, model, steps: int, repeats: int, warmup: int = WARMUP) -> float:
+    """Median seconds per step of one filter (:func:`time_filters` of it alone)."""
+    return float(np.median(time_filters([make], scenario, model, steps, repeats, warmup)[0]))
+
+
+def run(particle_counts=PARTICLE_COUNTS, repeats: int = 15, seed: int = 0) -> dict:
+    """Benchmark every filter; returns ``{"results": [{"filter", "particles", "us_per_step", "blocks_us"
+    (per round)}, ...], "gpf_over_spf": {N: ratio},
+    "gpf_over_paper_gpf": {N: ratio}, "machine": ...}`` (module docstring)."""
     default = ScenarioConfig()
     config = replace(default, duration=default.dt * (WARMUP + repeats * STEPS + 1))
     scenario = generate(config, seed)
     model = filter_model(config)
-    results = []
-    for name, n, make in _cases(particle_counts):
+    results, ratios, paper = [], {}, {}
+    for group in _groups(particle_counts):
+        n = group[0][1]
         steps = STEPS if n is None or n <= 10_000 else 5
-        seconds = time_filter(make, scenario, model, steps, repeats)
-        results.append({"filter": name, "particles": n, "us_per_step": seconds * 1e6})
-    per = {(r["filter"], r["particles"]): r["us_per_step"] for r in results}
-    ratios = {str(n): per[("GPF", n)] / per[("SPF", n)] for n in particle_counts}
-    paper = {str(n): per[("GPF", n)] / per[("GPF-paper", n)] for n in particle_counts}
+        blocks = time_filters([make for _, _, make in group], scenario, model, steps, repeats)
+        for (name, count, _), times in zip(group, blocks):
+            results.append({"filter": name, "particles": count, "us_per_step": float(np.median(times)) * 1e6,
+                            "blocks_us": [t * 1e6 for t in times]})
+        if group[0][0] == "GPF":
+            by_name = {name: np.asarray(times) for (name, _, _), times in zip(group, blocks)}
+            ratios[str(n)] = float(np.median(by_name["GPF"] / by_name["SPF"]))
+            paper[str(n)] = float(np.median(by_name["GPF"] / by_name["GPF-paper"]))
     return {"results": results, "gpf_over_spf": ratios, "gpf_over_paper_gpf": paper,
             "machine": {"python": platform.python_version(), "numpy": np.__version__,
                         "processor": platform.machine(),
@@ -105,6 +123,7 @@ def format_table(report: dict) -> str:
         us = r["us_per_step"]
         shown = f"{us:9.1f} us" if us < 1000 else f"{us / 1000:9.2f} ms"
         lines.append(f"{r['filter']:<10} {n:>8} {shown:>12}")
+    lines.append("ratios (medians over rounds of blocks timed in turn):")
     lines.append("GPF/SPF: " + ", ".join(f"N={n}: {v:.2f}" for n, v in report["gpf_over_spf"].items()))
     lines.append("GPF/GPF-paper: " + ", ".join(f"N={n}: {v:.2f}"
                                               for n, v in report["gpf_over_paper_gpf"].items()))
@@ -117,7 +136,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
     parser.add_argument("--particles", type=positive_int, nargs="+", default=list(PARTICLE_COUNTS),
                         help="particle counts for GPF and SPF (default: 500 10000 100000)")
-    parser.add_argument("--repeats", type=positive_int, default=5, help="timed blocks per filter (median taken)")
+    parser.add_argument("--repeats", type=positive_int, default=15,
+                        help="rounds of timed blocks (medians taken; default 15)")
     parser.add_argument("--node", action="store_true",
                         help="run the ROS node-latency benchmark instead (arguments after -- go to it)")
     args, rest = parser.parse_known_args(argv)

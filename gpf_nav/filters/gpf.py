@@ -174,7 +174,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         mean, centres, D = shrink(x_pred, self._weights, self.kernel_bandwidth)
         if dt > 0.0:
             D += self.model.process_noise(dt, self._pending_t)
-        C = cholesky_or_none(D) if np.isfinite(D).all() else None
+        C = cholesky_or_none(D, symmetric=True) if np.isfinite(D).all() else None  # (its lower triangle)
         if C is None:  # a collapsed cloud on a noise-free model, or a runaway one: nothing to project with
             self._set_costate(None, rows, dt)
             return super()._sample(x_pred, y, rows, dt)
@@ -187,7 +187,8 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
             return super()._sample(x_pred, y, rows, dt)
         G, wr, S, L_inv = whitened
         white_r = L_inv @ wr  # (k, N)
-        costate = ((L_inv.T @ white_r).T, rows, dt if dt > 0.0 else 1.0)  # S^-1 W r, outliers included
+        # S^-1 W r / dt, outliers included (the division folded into the small factor)
+        costate = (((L_inv.T / dt if dt > 0.0 else L_inv.T) @ white_r).T, rows, 1.0)
         used = self._gate(wr @ self._weights, S, rows)
         if not used.any():  # every component refused: a prediction
             x, correction, _ = ParticleFilter._sample(self, x_pred, y, used, dt)
@@ -336,7 +337,8 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         return shift, gaussian_shift_correction(shift, inverse_factor, z)
 
     def _after_update(self, y, rows):
-        self._previous_y = np.where(rows, y, np.nan)
+        if self.reference == "increment":  # the only reader of the previous measurement
+            self._previous_y = np.where(rows, y, np.nan)
 
 
 def antithetic_normals(rng: np.random.Generator, rows: int, count: int) -> np.ndarray:

@@ -302,7 +302,7 @@ class ParticleFilter(Filter):
                 self._costate_rows = np.zeros(m, bool)
             return
         if rows.all():
-            costate = a / dt
+            costate = a if dt == 1.0 else a / dt  # (a is the caller's new array)
         else:
             costate = np.zeros((self.n_particles, m))
             costate[:, rows] = a / dt
