@@ -163,11 +163,12 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         prediction, linearised once at the cloud's mean, and a draw of the resulting Gaussian proposal.
 
         In whitened coordinates (``x = centre + C w``, ``D = C C^T``; ``W R W^T = I``; ``G = W H C``;
-        ``S = G G^T + eps I``): ``w = z + G^T S^-1 (W r + sqrt(eps) v - G z)`` with ``z``, ``v`` standard
-        normal is an exact draw of ``q = N(centre + K r, (I - K H) D)``, ``K = C G^T S^-1 W``. Every solve
-        with ``S`` goes through the inverse ``L^-1`` of its Cholesky factor (``S = L L^T``): with
-        ``B = L^-1 G`` and ``E = C B^T`` ``(n, k)``, ``K = E L^-1 W`` and the draw is one product,
-        ``x = centre + E L^-1 W r + A [z; v]`` with ``A = [C - E B, sqrt(eps) E L^-1]`` ``(n, n + k)``.
+        ``S = G G^T + eps I = L L^T``, ``B = L^-1 G``) the proposal ``q = N(centre + K r, (I - K H) D)``,
+        ``K = C G^T S^-1 W``, is ``N(m, I - B^T B)`` with ``m = B^T L^-1 W r``. By Woodbury
+        ``I - B^T B = (I + G^T G / eps)^-1 = U U^T`` with ``U = R^-T`` and ``R R^T = I + G^T G / eps``, a matrix
+        at least the identity, so its Cholesky factor never fails: the draw is ``w = m + U z`` with ``n``
+        standard normals ``z`` (in antithetic pairs, :func:`antithetic_normals`), and the exact weight's
+        correction ``log N(x; centre, D) - log q(x) = (|z|^2 - |w|^2) / 2 + log det U``.
         """
         if self.metric != "cloud" or not rows.any():
             return super()._sample(x_pred, y, rows, dt)
@@ -198,31 +199,37 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         if used is not rows:  # outliers left out (a principal block of a sound S is sound)
             G, wr, S, L_inv = self._whitened(H, r, used, C)
             white_r = L_inv @ wr
-        k = G.shape[0]
-        normals = antithetic_normals(self.rng, n + k, self.n_particles)  # [z; v]
+        # the proposal in whitened coordinates w = C^-1 (x - centre): N(m, I - B^T B), B = L^-1 G,
+        # m = B^T L^-1 W r; and I - B^T B = (I + G^T G / eps)^-1 (Woodbury) = U U^T with U = R^-T,
+        # R R^T = I + G^T G / eps (>= I: its factor never fails)
         B = L_inv @ G  # (k, n)
-        E = C @ B.T  # (n, k): K = E L^-1 W
+        M = G.T @ G  # exactly symmetric (numpy forms A^T A as such)
+        M *= 1.0 / eps
+        M.flat[::n + 1] += 1.0
+        R = cholesky_or_none(M, symmetric=True)
+        if R is None:  # (a non-finite G fails the check of S before this)
+            self._set_costate(None, rows, dt)
+            return super()._sample(x_pred, y, rows, dt)
+        U = triangular_inverse(R).T  # (n, n)
+        z = antithetic_normals(self.rng, n, self.n_particles)
+        m = B.T @ white_r  # (n, N)
+        w = U @ z
+        w += m
         pair = np.empty((2 * n, self.n_particles))  # [proposal means; x]: weighed together after the update
-        proposal_means = np.matmul(E, white_r, out=pair[:n])
+        proposal_means = np.matmul(C, m, out=pair[:n])
         proposal_means += centres
-        weighted = self.weighting != "likelihood"
-        draws = _proposal_map(C, B, E, L_inv, eps, weighted) @ normals  # [x - proposal means; e]
-        x = np.add(draws[:n], proposal_means, out=pair[n:])
+        x = np.matmul(C, w, out=pair[n:])
+        x += centres
         if self.moment_matching:
-            self._proposal = (pair, D - E @ E.T)  # the spread (I - K H) D = A A^T
-        if not weighted:
+            spread = C @ U  # (I - K H) D = C U (C U)^T
+            self._proposal = (pair, spread @ spread.T)
+        if self.weighting == "likelihood":
             return x, 0.0, used
-        # log N(x; centre, D) - log q(x) = (|p|^2 - |p + m|^2 + |e|^2 + constant) / 2 with the whitened
-        # p = C^-1 (x - proposal mean) and m = C^-1 (proposal mean - centre) = B^T L^-1 W r, and
-        # sqrt(eps) e = W H (x - proposal mean) = G p, e = [sqrt(eps) L^-T B, I - eps S^-1] [z; v];
-        # |p|^2 - |p + m|^2 = -L^-1 W r . (2 B p + B B^T L^-1 W r) with B p = sqrt(eps) L^-1 e
-        e = draws[n:]
-        cross = (2.0 * math.sqrt(eps) * L_inv) @ e
-        cross += (B @ B.T) @ white_r
-        correction = np.einsum("kn,kn->n", e, e)
-        correction -= np.einsum("kn,kn->n", white_r, cross)
-        correction += k * math.log(eps) + 2.0 * sum(map(math.log, L_inv.diagonal().tolist()))  # - log det S
+        # log N(x; centre, D) - log q(x) = (|w|^2 ... ): -|w|^2 / 2 + |z|^2 / 2 + log det U
+        correction = np.einsum("kn,kn->n", z, z)
+        correction -= np.einsum("kn,kn->n", w, w)
         correction *= 0.5
+        correction -= sum(map(math.log, R.diagonal().tolist()))  # log det U
         return x, correction, used
 
     def _whitened(self, H: np.ndarray, r: np.ndarray, rows: np.ndarray, C: np.ndarray
@@ -353,25 +360,3 @@ def antithetic_normals(rng: np.random.Generator, rows: int, count: int) -> np.nd
     out[:, :half] = z
     np.negative(z[:, :count - half], out=out[:, half:])
     return out
-
-
-def _proposal_map(C: np.ndarray, B: np.ndarray, E: np.ndarray, L_inv: np.ndarray, eps: float,
-                  weighted: bool) -> np.ndarray:
-    """The matrix taking the cloud metric's normal draws ``[z; v]`` ``(n + k, N)`` to the proposal draw
-    less its mean, ``A [z; v]`` with ``A = [C - E B, sqrt(eps) E L^-1]`` ``(n, n + k)``, and, when
-    ``weighted``, also to the whitened measurement error ``e = [sqrt(eps) L^-T B, I - eps S^-1] [z; v]``:
-    one product for the draw and its weight. ``C`` ``(n, n)``, ``B = L^-1 G`` ``(k, n)``, ``E = C B^T``
-    ``(n, k)``, ``L^-1`` ``(k, k)``; returns ``(n, n + k)`` or ``(n + k, n + k)``.
-
-    Both blocks share a factor: ``[A; e's map] = diag(C, I) + [-E; sqrt(eps) L^-T] [B, -sqrt(eps) L^-1]``."""
-    n, k = C.shape[0], L_inv.shape[0]
-    root = math.sqrt(eps)
-    right = np.concatenate((B, -root * L_inv), axis=1)  # (k, n + k)
-    if not weighted:
-        A = -E @ right
-        A[:, :n] += C
-        return A
-    A = np.concatenate((-E, root * L_inv.T)) @ right
-    A[:n, :n] += C
-    A[n:, n:].flat[::k + 1] += 1.0  # I - eps S^-1
-    return A
