@@ -87,7 +87,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
             (:attr:`mean`, :attr:`covariance`) is the model average of the two hypotheses
             (:mod:`gpf_nav.filters.model_averaging`); 0 gives the compensated posterior as it is.
         kernel_bandwidth: ``h`` of the cloud metric's kernel in (0, 1); default
-            :func:`~gpf_nav.filters.kernel.default_bandwidth` (1.4 times the Gaussian-optimal one).
+            :func:`~gpf_nav.filters.kernel.default_bandwidth` (1.6 times the Gaussian-optimal one).
         outlier_gate: cloud metric: a measured component whose innovation is beyond this many standard
             deviations is not used (counted in :attr:`gated`; its co-state is still computed, so the
             integrity monitor sees it); 0 disables the gate.

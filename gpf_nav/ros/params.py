@@ -39,7 +39,7 @@ ESTIMATOR = [
     Spec("unmodelled_acceleration_time", 1.0e6, "gpf: correlation time of the unmodelled acceleration [s], > 0."),
     Spec("nominal_prior", 0.5, "gpf: prior probability that the model needs no unmodelled acceleration; the estimate averages the two hypotheses; 0 publishes the compensated posterior as it is; in [0, 1)."),
     Spec("model_switch_time", 2.0e5, "gpf-mm: mean sojourn time of the nominal / compensated model chain [s], > 0."),
-    Spec("kernel_bandwidth", 0.0, "gpf, cloud metric: kernel bandwidth h in (0, 1); 0: the default, 1.4 times the Gaussian-optimal one for N and the state dimension (at most 0.95)."),
+    Spec("kernel_bandwidth", 0.0, "gpf, cloud metric: kernel bandwidth h in (0, 1); 0: the default, 1.6 times the Gaussian-optimal one for N and the state dimension (at most 0.95)."),
     Spec("collapse_steps", 0, "gpf/spf: re-initialise after this many consecutive updates with ESS < 1.5 particles; 0 never."),
     Spec("resampling", "systematic", "Resampling scheme: systematic, stratified, residual or multinomial."),
     Spec("ess_threshold", 0.5, "tau in (0, 1]: resample when ESS < tau N."),
