@@ -206,10 +206,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         M = G.T @ G  # exactly symmetric (numpy forms A^T A as such)
         M *= 1.0 / eps
         M.flat[::n + 1] += 1.0
-        R = cholesky_or_none(M, symmetric=True)
-        if R is None:  # (a non-finite G fails the check of S before this)
-            self._set_costate(None, rows, dt)
-            return super()._sample(x_pred, y, rows, dt)
+        R = cholesky_or_none(M, symmetric=True)  # never None: M >= I, and the check of S bounds G G^T / eps
         U = triangular_inverse(R).T  # (n, n)
         z = antithetic_normals(self.rng, n, self.n_particles)
         m = B.T @ white_r  # (n, N)
@@ -225,7 +222,8 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
             self._proposal = (pair, spread @ spread.T)
         if self.weighting == "likelihood":
             return x, 0.0, used
-        # log N(x; centre, D) - log q(x) = (|w|^2 ... ): -|w|^2 / 2 + |z|^2 / 2 + log det U
+        # log N(x; centre, D) - log q(x) = (|z|^2 - |w|^2) / 2 + log det U (x - centre = C w, and
+        # x - proposal mean = C U z)
         correction = np.einsum("kn,kn->n", z, z)
         correction -= np.einsum("kn,kn->n", w, w)
         correction *= 0.5
