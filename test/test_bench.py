@@ -20,7 +20,8 @@ def test_bench_reports_every_filter_and_the_ratio_of_the_same_run(capsys):
     assert all(np.isfinite(t) and t > 0 for t in times.values())
     assert all(times[name] == pytest.approx(np.median(b)) and b.size == 1 for name, b in blocks.items())
     # the ratios are the medians over rounds of the ratio of the two filters' blocks of a round
-    assert report["gpf_over_spf"]["200"] == pytest.approx(np.median(blocks[("GPF", 200)] / blocks[("SPF", 200)]))
+    assert report["gpf_over_spf"]["200"] == pytest.approx(
+        np.median(blocks[("GPF", 200)] / blocks[("SPF", 200)]))
     assert report["gpf_over_paper_gpf"]["200"] == pytest.approx(
         np.median(blocks[("GPF", 200)] / blocks[("GPF-paper", 200)]))
     expected = "retain_freed_memory" if allocator.retained else "default"

@@ -194,7 +194,8 @@ def test_acceleration_in_the_local_frame_keeps_its_direction_in_it():
     G, _ = model._coupling(2.0)
     radial = x0[:, :3] / np.linalg.norm(x0[:, :3], axis=1, keepdims=True)
     pushed = model.transition(x, 2.0)[:, :6] - base.transition(x0, 2.0)
-    np.testing.assert_allclose(pushed, 0.1 * np.hstack([G[0, 0] * radial, G[3, 0] * radial]), rtol=1e-6, atol=1e-12)
+    np.testing.assert_allclose(pushed, 0.1 * np.hstack([G[0, 0] * radial, G[3, 0] * radial]),
+                               rtol=1e-6, atol=1e-12)
     for _ in range(900):
         x = model.transition(x, 2.0)
     decay = np.exp(-1800.0 / 1e6)

@@ -40,7 +40,8 @@ def _groups(particle_counts) -> list[list[tuple[str, int | None, object]]]:
     for n in particle_counts:
         groups.append([
             ("GPF", n, lambda model, seed, n=n: GeometricProjectionPF(model, n, seed=seed)),
-            ("GPF-paper", n, lambda model, seed, n=n: GeometricProjectionPF(model, n, seed=seed, **PAPER_GPF)),
+            ("GPF-paper", n,
+             lambda model, seed, n=n: GeometricProjectionPF(model, n, seed=seed, **PAPER_GPF)),
             ("GPF-mm", n, lambda model, seed, n=n: MultipleModelGPF(model, n, seed=seed)),
             ("SPF", n, lambda model, seed, n=n: BootstrapPF(model, n, seed=seed))])
     groups.append([("EKF", None, lambda model, seed: ExtendedKF(model, seed=seed)),
@@ -55,7 +56,8 @@ STEPS = 50
 """Steps per timed block (5 above N = 10 000)."""
 
 
-def time_filters(makers, scenario, model, steps: int, repeats: int, warmup: int = WARMUP) -> list[list[float]]:
+def time_filters(makers, scenario, model, steps: int, repeats: int,
+                 warmup: int = WARMUP) -> list[list[float]]:
     """Seconds per predict+update step of each filter made by ``makers`` (``constructor(model, seed)``), one
     list of ``repeats`` block times each: the filters run blocks of ``steps`` steps in turn, round after
     round, the first of a round rotating. Each filter's step takes the scenario's next measurement (so it

@@ -165,8 +165,8 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         In whitened coordinates (``x = centre + C w``, ``D = C C^T``; ``W R W^T = I``; ``G = W H C``;
         ``S = G G^T + eps I = L L^T``, ``B = L^-1 G``) the proposal ``q = N(centre + K r, (I - K H) D)``,
         ``K = C G^T S^-1 W``, is ``N(m, I - B^T B)`` with ``m = B^T L^-1 W r``. By Woodbury
-        ``I - B^T B = (I + G^T G / eps)^-1 = U U^T`` with ``U = R^-T`` and ``R R^T = I + G^T G / eps``, a matrix
-        at least the identity, so its Cholesky factor never fails: the draw is ``w = m + U z`` with ``n``
+        ``I - B^T B = (I + G^T G / eps)^-1 = U U^T`` with ``U = R^-T`` and ``R R^T = I + G^T G / eps``, a
+        matrix at least the identity, so its Cholesky factor never fails: the draw is ``w = m + U z`` with ``n``
         standard normals ``z`` (in antithetic pairs, :func:`antithetic_normals`), and the exact weight's
         correction ``log N(x; centre, D) - log q(x) = (|z|^2 - |w|^2) / 2 + log det U``.
         """

@@ -12,8 +12,8 @@ orbit's radial / along-track / cross-track axes), ``a`` holds the coordinates of
 frame, taken at each particle's state: a force that keeps its direction in the frame (a gravity-field
 error is radial, drag and thrust are along-track) is a constant to the compensation, not a rotating vector
 it must keep re-learning. Nothing here knows what the error is (a gravity scale, a thrust, drag or a
-mis-modelled field are all "an acceleration the nominal drift does not have"); the filter estimates ``a`` from the
-measurements.
+mis-modelled field are all "an acceleration the nominal drift does not have"); the filter estimates
+``a`` from the measurements.
 
 Over a step, ``a`` (turned to the state's own axes by the frame at the step's start) enters the base
 transition through the exact response of a double integrator (position ``tau (dt - tau (1 - e))``,
@@ -35,7 +35,8 @@ from scipy.linalg import expm
 from gpf_nav.models.base import StateSpaceModel
 
 FRAME_STEP = 1e-6
-"""Relative step of the central differences of a local frame (:meth:`ModelErrorCompensation.transition_jacobian`)."""
+"""Relative step of the central differences of a local frame
+(:meth:`ModelErrorCompensation.transition_jacobian`)."""
 MAX_GAP = 100.0
 """Longest interval, in correlation times, over which the compensation noise is integrated; a longer
 one gets the noise of this one (the compensation state has long forgotten its value by then)."""
@@ -174,7 +175,8 @@ class ModelErrorCompensation(StateSpaceModel):
         pushed = np.einsum("sjnik,nk->sjni", frames, a)  # (2, n, N, p)
         return ((pushed[0] - pushed[1]) / (2.0 * steps.T[..., None])).transpose(1, 2, 0)
 
-    def world_acceleration(self, x: np.ndarray, a: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def world_acceleration(self, x: np.ndarray, a: np.ndarray, cov: np.ndarray
+                           ) -> tuple[np.ndarray, np.ndarray]:
         """An estimated acceleration ``a`` ``(p,)`` with covariance ``cov`` ``(p, p)`` on the state's own
         axes (the world's, for the lunar model): turned by the local frame at the base state ``x``
         ``(n,)``, as it is without one."""
