@@ -4,66 +4,33 @@
     gpf-nav montecarlo   the paper's Monte Carlo table (``gpf_nav.experiments.montecarlo``)
     gpf-nav sweep        mismatch / noise sweeps (``gpf_nav.experiments.sweep``)
     gpf-nav integrity    co-state monitor false alarms and detection delays (``gpf_nav.experiments.integrity``)
-    gpf-nav demo         simulator + estimator over ROS 2, with a summary (``gpf_nav.ros.demo``)
-    gpf-nav record       the simulator's scenario written as a rosbag2 bag (``gpf_nav.ros.record``)
-    gpf-nav replay       the estimator run offline over a rosbag2 bag, with a summary (``gpf_nav.ros.replay``)
+    gpf-nav demo         simulator + estimator over ROS 2, with a summary (``gpf_nav.tools.demo``)
+    gpf-nav record       the simulator's scenario written as a rosbag2 bag (``gpf_nav.bags.record``)
+    gpf-nav replay       the estimator run offline over a rosbag2 bag, with a summary (``gpf_nav.bags.replay``)
 
 Sub-command modules are imported lazily, so e.g. ``bench`` needs neither ROS nor matplotlib. Every
 sub-command runs with the heap tuning of :mod:`gpf_nav.allocator` and BLAS bounded to one thread
 (:mod:`gpf_nav.blas`). Bad arguments, to ``gpf-nav`` or to any sub-command, end with one line on stderr
-naming the problem and exit status 2 (:class:`CommandParser`).
+naming the problem and exit status 2 (:class:`gpf_nav.arguments.CommandParser`).
 """
 from __future__ import annotations
 
-import argparse
 import importlib
 import sys
 
 from gpf_nav.allocator import retain_freed_memory
+from gpf_nav.arguments import USAGE_ERROR
 from gpf_nav.blas import limit_blas_threads
 
 COMMANDS = {
     "bench": "gpf_nav.experiments.bench",
     "montecarlo": "gpf_nav.experiments.montecarlo",
     "sweep": "gpf_nav.experiments.sweep",
-    "demo": "gpf_nav.ros.demo",
+    "demo": "gpf_nav.tools.demo",
     "integrity": "gpf_nav.experiments.integrity",
-    "record": "gpf_nav.ros.record",
-    "replay": "gpf_nav.ros.replay",
+    "record": "gpf_nav.bags.record",
+    "replay": "gpf_nav.bags.replay",
 }
-USAGE_ERROR = 2
-
-
-class CommandParser(argparse.ArgumentParser):
-    """The sub-commands' argument parser: an error is one line, ``<prog>: error: <problem>``, on
-    stderr, and exit status 2 (argparse's own convention, without the usage block)."""
-
-    def error(self, message: str):
-        self.exit(USAGE_ERROR, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
-
-
-def positive_int(text: str) -> int:
-    """argparse type: an integer >= 1."""
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a positive integer")
-    return value
-
-
-def positive_float(text: str) -> float:
-    """argparse type: a finite number > 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not (0.0 < value < float("inf")):
-        raise argparse.ArgumentTypeError(f"{text!r} is not a positive number")
-    return value
-
-
 def main(argv: list[str] | None = None) -> int:
     """Dispatch ``gpf-nav <command> [args]`` to ``<module>.main(args)``; returns the exit code."""
     argv = sys.argv[1:] if argv is None else list(argv)

@@ -29,11 +29,11 @@ pytest.importorskip("rosbags")
 from nav_msgs.msg import Odometry  # noqa: E402
 
 from gpf_nav.ros import conversions as conv  # noqa: E402
-from gpf_nav.ros.bag import BagReader, deserialize  # noqa: E402
-from gpf_nav.ros.params import ESTIMATOR, ParameterError, parameters_from_files, simulator_specs  # noqa: E402
-from gpf_nav.ros.playback import build_events  # noqa: E402
-from gpf_nav.ros.record import record  # noqa: E402
-from gpf_nav.ros.replay import REPLAY_PARAMETERS, replay  # noqa: E402
+from gpf_nav.bags.bag import BagReader, deserialize  # noqa: E402
+from gpf_nav.estimator.params import ESTIMATOR, ParameterError, parameters_from_files, simulator_specs  # noqa: E402
+from gpf_nav.playback import build_events  # noqa: E402
+from gpf_nav.bags.record import record  # noqa: E402
+from gpf_nav.bags.replay import REPLAY_PARAMETERS, replay  # noqa: E402
 from gpf_nav.ros.simulator_node import (EVENT_TOPICS, event_message, handover_message,  # noqa: E402
                                         scenario_from_parameters)
 
@@ -496,7 +496,7 @@ def test_use_sim_time_takes_the_node_clock_from_the_bags_clock(tmp_path, recorde
     ``ros2 bag record`` of the simulator writes it): with use_sim_time the predictions follow /clock; on
     recording time they cannot (the data are 1.7e9 s old for that clock), as for a node without sim time.
     The updates are the same either way: header stamps drive the filter."""
-    from gpf_nav.ros.bag import BagWriter, qos_profile
+    from gpf_nav.bags.bag import BagWriter, qos_profile
     from nav_msgs.msg import Odometry
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import Imu
@@ -535,7 +535,7 @@ def test_use_sim_time_takes_the_node_clock_from_the_bags_clock(tmp_path, recorde
 
 
 def test_truth_at_interpolates_only_between_close_samples():
-    from gpf_nav.ros.replay_report import truth_at
+    from gpf_nav.bags.replay_report import truth_at
     truth = {10 * S: np.arange(6.0), 11 * S: np.arange(6.0) + 2.0, 20 * S: np.zeros(6)}
     stamps = np.array([9 * S, 10 * S, 10 * S + S // 4, 11 * S, 15 * S, 20 * S, 21 * S], dtype=np.int64)
     out = truth_at(truth, stamps, S)
@@ -549,7 +549,7 @@ def test_truth_at_interpolates_only_between_close_samples():
 def test_header_stamp_read_from_the_cdr_bytes():
     from rclpy.serialization import serialize_message
     from rosbags.typesys import Stores, get_typestore
-    from gpf_nav.ros.bag import header_stamp_ns
+    from gpf_nav.bags.bag import header_stamp_ns
     stamp = 1234 * S + 567
     odom = conv.odometry_msg(np.arange(6.0), np.eye(6), stamp, "moon_inertial", "base_link")
     assert header_stamp_ns(serialize_message(odom)) == stamp

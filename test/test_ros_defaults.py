@@ -26,7 +26,7 @@ from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 
 from gpf_nav.ros import conversions as conv  # noqa: E402
 from gpf_nav.ros.diagnostics import STATUS_NAME, parse_values  # noqa: E402
-from gpf_nav.ros.params import ESTIMATOR  # noqa: E402
+from gpf_nav.estimator.params import ESTIMATOR  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULTS = {spec.name: spec.default for spec in ESTIMATOR}

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from gpf_nav.ros import diagnostics as diag
-from gpf_nav.ros.engine import EngineConfig, EstimatorEngine
-from gpf_nav.ros.factory import make_filter
+from gpf_nav.estimator.engine import EngineConfig, EstimatorEngine
+from gpf_nav.estimator.factory import make_filter
 from gpf_nav.scenario import ScenarioConfig, filter_model, generate
 
 S = 1_000_000_000
@@ -183,7 +183,7 @@ from std_srvs.srv import Trigger  # noqa: E402
 
 from gpf_nav.ros import conversions as conv  # noqa: E402
 from gpf_nav.ros.estimator_node import EstimatorNode  # noqa: E402
-from gpf_nav.ros.params import ParameterError  # noqa: E402
+from gpf_nav.estimator.params import ParameterError  # noqa: E402
 from test_ros_nodes import _assert_diagnostics_finite, _rae, ros  # noqa: E402,F401
 
 ERROR, WARN = b"\x02", b"\x01"

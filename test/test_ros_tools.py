@@ -38,7 +38,7 @@ def test_demo_runs_end_to_end_and_prints_a_summary(private_domain, capsys):
 
 
 def test_demo_text_summary(private_domain, capsys):
-    from gpf_nav.ros.demo import main
+    from gpf_nav.tools.demo import main
     forty_simulated_seconds = ["--duration", "40", "--rate-factor", "20", "--filter", "ekf"]
     assert main(forty_simulated_seconds) == 0
     out = capsys.readouterr().out
@@ -47,7 +47,7 @@ def test_demo_text_summary(private_domain, capsys):
 
 def test_latency_benchmark_small(private_domain):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    result = subprocess.run([sys.executable, "-m", "gpf_nav.ros.latency", "--rates", "20", "--particles", "200",
+    result = subprocess.run([sys.executable, "-m", "gpf_nav.tools.latency", "--rates", "20", "--particles", "200",
                              "--seconds", "1.5", "--warmup", "5", "--json"], env=env, capture_output=True,
                             text=True, timeout=240)
     assert result.returncode == 0, result.stderr[-3000:]

@@ -6,11 +6,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gpf_nav.ros import validation as val
-from gpf_nav.ros.engine import EngineConfig, EstimatorEngine
-from gpf_nav.ros.factory import FILTERS, make_filter, make_lunar_model
-from gpf_nav.ros.initialization import batch_initial_state, inverse_rae
-from gpf_nav.ros.playback import build_events, hermite_state
+from gpf_nav.estimator import validation as val
+from gpf_nav.estimator.engine import EngineConfig, EstimatorEngine
+from gpf_nav.estimator.factory import FILTERS, make_filter, make_lunar_model
+from gpf_nav.estimator.initialization import batch_initial_state, inverse_rae
+from gpf_nav.playback import build_events, hermite_state
 from gpf_nav.scenario import ScenarioConfig, filter_model, generate
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -151,7 +151,7 @@ def _flatten(d, prefix=""):
                                                 ("simulator.yaml", "lunar_simulator", "simulator")])
 def test_config_files_match_code_defaults(file, node, specs):
     yaml = pytest.importorskip("yaml")
-    from gpf_nav.ros import params
+    from gpf_nav.estimator import params
     table = params.ESTIMATOR if specs == "ESTIMATOR" else params.simulator_specs()
     data = yaml.safe_load((ROOT / "config" / file).read_text())
     values = _flatten(data[node]["ros__parameters"])

@@ -1,4 +1,4 @@
-"""The soak (``python -m gpf_nav.ros.soak``) run short: 3 simulated minutes at 10x with high injection
+"""The soak (``python -m gpf_nav.tools.soak``) run short: 3 simulated minutes at 10x with high injection
 rates, on a private DDS domain. The full 30-minute figures are in docs/soak.md."""
 import json
 import math
@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from gpf_nav.ros.soak import GARBAGE, STREAM_CATEGORIES, Ledger
+from gpf_nav.tools.soak import GARBAGE, STREAM_CATEGORIES, Ledger
 
 _DOMAINS = iter(random.Random(os.getpid() ^ time.time_ns() ^ 0x50A4).sample(range(110, 230), 10))
 S = 1_000_000_000
@@ -30,7 +30,7 @@ def test_short_soak_accounts_for_every_message(monkeypatch, capsys):
     pytest.importorskip("rclpy")
     monkeypatch.setenv("ROS_DOMAIN_ID", str(next(_DOMAINS)))
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    from gpf_nav.ros.soak import main
+    from gpf_nav.tools.soak import main
     code = main(["--sim-minutes", "3", "--rate-factor", "10", "--warmup", "60", "--seed", "0",
                  "--drop", "0.05", "--delay", "0.05", "--duplicate", "0.05", "--mask", "0.05",
                  "--garbage", "0.3", "--burst", "0.05", "--burst-size", "10", "--timeout", "150", "--json"])

@@ -10,7 +10,7 @@ reported figure is a filter's median block time per step over ``--repeats`` roun
 GPF/SPF and GPF/GPF-paper ratios are the medians over the rounds of the ratio of the two blocks of a
 round. ``gpf-nav bench`` runs with the heap tuning of :mod:`gpf_nav.allocator` (the report says whether
 it was applied); ``python -m gpf_nav.experiments.bench`` runs with the C library's default allocator, for
-comparison. ``--node`` runs the ROS node-latency benchmark instead (``gpf_nav.ros.latency``).
+comparison. ``--node`` runs the ROS node-latency benchmark instead (``gpf_nav.tools.latency``).
 """
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ from dataclasses import replace
 import numpy as np
 
 from gpf_nav import allocator
-from gpf_nav.cli import CommandParser, positive_int
+from gpf_nav.arguments import CommandParser, positive_int
 from gpf_nav.filters import (BootstrapPF, EnsembleKF, ExtendedKF, GeometricProjectionPF, MultipleModelGPF,
                              UnscentedKF)
 from gpf_nav.scenario import ScenarioConfig, filter_model, generate
@@ -144,7 +144,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="run the ROS node-latency benchmark instead (arguments after -- go to it)")
     args, rest = parser.parse_known_args(argv)
     if args.node:
-        from gpf_nav.ros import latency
+        from gpf_nav.tools import latency
         return int(latency.main(rest + (["--json"] if args.json else [])) or 0)
     if rest:
         parser.error(f"unrecognised arguments: {' '.join(rest)}")

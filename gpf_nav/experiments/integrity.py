@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gpf_nav.cli import CommandParser, positive_int
+from gpf_nav.arguments import CommandParser, positive_int
 from gpf_nav.integrity import CostateMonitor
 from gpf_nav.models.base import wrap_angle
 from gpf_nav.models.lunar import MOON_RADIUS, LunarDescentModel

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gpf_nav.cli import CommandParser, positive_float, positive_int
+from gpf_nav.arguments import CommandParser, positive_float, positive_int
 from gpf_nav.experiments import metrics
 from gpf_nav.experiments.parallel import default_workers, map_tasks
 from gpf_nav.experiments.runner import (ALIASES, DEFAULT_PARTICLES, EXTRA_FILTERS, FILTERS, GPF_DEFAULT,

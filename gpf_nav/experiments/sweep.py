@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gpf_nav.cli import CommandParser
+from gpf_nav.arguments import CommandParser
 from gpf_nav.experiments import metrics
 from gpf_nav.experiments.montecarlo import (add_common_arguments, base_config, git_commit, parse_cases,
                                             parse_filters,

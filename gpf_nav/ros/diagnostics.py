@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from gpf_nav.ros.validation import REASONS
+from gpf_nav.estimator.validation import REASONS
 
 OK, WARN, ERROR = 0, 1, 2
 STATUS_NAME = "gpf_estimator: filter"
@@ -128,7 +128,7 @@ def _integrity_problem(report) -> str:
 
 
 def integrity_values(report, filter_name: str) -> list[tuple[str, str]]:
-    """The ``integrity ...`` key/values of an :class:`gpf_nav.ros.engine.IntegrityReport` (no NaN:
+    """The ``integrity ...`` key/values of an :class:`gpf_nav.estimator.engine.IntegrityReport` (no NaN:
     figures that do not exist read ``n/a``)."""
     if report.state == "disabled":
         head = [("integrity level", "disabled"), ("integrity monitor", "disabled (monitor_enabled: false)")]

@@ -1,12 +1,12 @@
 """The estimator node's work between a received message and the messages it publishes, without a node.
 
-:class:`EstimatorCore` builds the model, filter and :class:`gpf_nav.ros.engine.EstimatorEngine` from the
-node's parameters, applies the message-level checks of :mod:`gpf_nav.ros.validation`, feeds the engine,
+:class:`EstimatorCore` builds the model, filter and :class:`gpf_nav.estimator.engine.EstimatorEngine` from the
+node's parameters, applies the message-level checks of :mod:`gpf_nav.estimator.validation`, feeds the engine,
 and hands every output message to a ``publish(topic, msg)`` callable. The node clock comes in as
 ``now_ns`` with each call. Two drivers:
 
 * ``estimator_node`` (subscriptions, timers on the node clock, publishers);
-* ``gpf-nav replay`` (:mod:`gpf_nav.ros.replay`): messages from a rosbag2 bag, the node clock being each
+* ``gpf-nav replay`` (:mod:`gpf_nav.bags.replay`): messages from a rosbag2 bag, the node clock being each
   message's recording time.
 
 So both apply the same parameters, checks, counters and outputs. Topic names are the node's
@@ -27,10 +27,10 @@ from std_msgs.msg import Float64
 
 from gpf_nav.ros import conversions as conv
 from gpf_nav.ros import diagnostics as diag
-from gpf_nav.ros import validation as val
-from gpf_nav.ros.engine import EngineConfig, EstimatorEngine
-from gpf_nav.ros.factory import make_filter, make_lunar_model
-from gpf_nav.ros.params import ParameterError
+from gpf_nav.estimator import validation as val
+from gpf_nav.estimator.engine import EngineConfig, EstimatorEngine
+from gpf_nav.estimator.factory import make_filter, make_lunar_model
+from gpf_nav.estimator.params import ParameterError
 
 LOG_THROTTLE = 5.0  # s (wall clock) between two log lines about the same refusal reason
 
@@ -132,7 +132,7 @@ class EstimatorCore:
     """The estimator's message handling. Raises :class:`ParameterError` on invalid parameters.
 
     Args:
-        params: the estimator's parameter values (``gpf_nav.ros.params.ESTIMATOR`` names).
+        params: the estimator's parameter values (``gpf_nav.estimator.params.ESTIMATOR`` names).
         publish: ``publish(topic, msg)``, topic one of :data:`OUTPUT_TOPICS`.
         logger: anything with ``info``, ``warning`` and ``error`` methods taking one string.
         monotonic: steady clock [s] of the engine (rate limit, ERROR and alarm holds).

@@ -24,8 +24,9 @@ from gpf_nav.allocator import retain_freed_memory
 from gpf_nav.blas import limit_blas_threads
 from gpf_nav.ros import shutdown
 from gpf_nav.ros.estimator_core import INPUT_TOPICS, OUTPUT_TOPICS, EstimatorCore
-from gpf_nav.ros.factory import FILTERS
-from gpf_nav.ros.params import ESTIMATOR, ParameterError, declare
+from gpf_nav.estimator.factory import FILTERS
+from gpf_nav.estimator.params import ESTIMATOR, ParameterError
+from gpf_nav.ros.parameters import declare
 
 NODE_NAME = "gpf_estimator"
 

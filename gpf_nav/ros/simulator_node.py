@@ -3,7 +3,7 @@
 Generates the truth with the core scenario generator (or replays a CSV truth, parameter
 ``truth_csv``) and publishes, in simulated time, ``measurements/rae``, ``imu``, ``truth/odometry`` and
 ``/clock``. A wall-clock loop at ``clock_rate`` Hz advances simulated time by ``rate_factor`` times
-the elapsed wall time, publishes ``/clock`` and releases every event of :mod:`gpf_nav.ros.playback`
+the elapsed wall time, publishes ``/clock`` and releases every event of :mod:`gpf_nav.playback`
 due by then, with the event's own stamp; so message contents never depend on timing: same seed, same
 messages. By default simulated time starts at the wall-clock time (``start_time`` negative), so at
 ``rate_factor`` 1 an estimator on the wall clock accepts the stamps, and the mission's prior is handed
@@ -29,8 +29,9 @@ from sensor_msgs.msg import Imu
 
 from gpf_nav.ros import conversions as conv
 from gpf_nav.ros import shutdown
-from gpf_nav.ros.params import ParameterError, declare, simulator_specs
-from gpf_nav.ros.playback import NS, build_events
+from gpf_nav.estimator.params import ParameterError, simulator_specs
+from gpf_nav.ros.parameters import declare
+from gpf_nav.playback import NS, build_events
 
 NODE_NAME = "lunar_simulator"
 
@@ -49,7 +50,7 @@ def scenario_from_parameters(p: dict):
 
 EVENT_TOPICS = {"measurement": ("measurements/rae", Vector3Stamped), "truth": ("truth/odometry", Odometry),
                 "imu": ("imu", Imu)}
-"""Event kind of :mod:`gpf_nav.ros.playback` -> (topic, message type); ``/clock`` besides."""
+"""Event kind of :mod:`gpf_nav.playback` -> (topic, message type); ``/clock`` besides."""
 QOS_DEPTH = 1000
 """Depth of the simulator's reliable publishers (all topics, ``/clock`` too): a subscriber stalled for
 seconds at a high ``rate_factor`` (a busy machine) receives every message late rather than losing some."""

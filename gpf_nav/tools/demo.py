@@ -15,8 +15,8 @@ import time
 
 import numpy as np
 
-from gpf_nav.cli import CommandParser, positive_float, positive_int
-from gpf_nav.ros.factory import FILTERS, make_filter
+from gpf_nav.arguments import CommandParser, positive_float, positive_int
+from gpf_nav.estimator.factory import FILTERS, make_filter
 from gpf_nav.scenario import ScenarioConfig, filter_model
 
 

@@ -1,6 +1,6 @@
 """Soak test: simulator -> fault injector -> estimator over DDS for a long simulated run.
 
-    python -m gpf_nav.ros.soak [--sim-minutes 30] [--rate-factor 10] [--seed 0] [--json]
+    python -m gpf_nav.tools.soak [--sim-minutes 30] [--rate-factor 10] [--seed 0] [--json]
 
 The estimator runs as its own process (``python -m gpf_nav.ros.estimator_node``, the code of the
 installed ``estimator``) on simulated time; its resident memory is read from ``/proc/<pid>/status``.
@@ -51,7 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gpf_nav.ros.validation import REASONS
+from gpf_nav.estimator.validation import REASONS
 
 NS = 1_000_000_000
 RAW_TOPIC = "soak/raw/rae"
@@ -71,7 +71,7 @@ STREAM_CATEGORIES = ("passed", "dropped", "delayed", "duplicated", "masked")
 
 
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="python -m gpf_nav.ros.soak", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m gpf_nav.tools.soak", description=__doc__.split("\n\n")[0])
     ap.add_argument("--sim-minutes", type=float, default=30.0, help="simulated minutes (default 30)")
     ap.add_argument("--rate-factor", type=float, default=10.0, help="simulated s per wall s (default 10)")
     ap.add_argument("--seed", type=int, default=0, help="injector and scenario seed (default 0)")
@@ -555,7 +555,7 @@ def _summarise(args, sim, ledger: Ledger, listener: Listener, alive: bool, exit_
         "completed": bool(sim.finished),
         "passed": all(checks.values()),
         "checks": checks,
-        "command": ("python -m gpf_nav.ros.soak " + " ".join(_argv(args))).rstrip(),
+        "command": ("python -m gpf_nav.tools.soak " + " ".join(_argv(args))).rstrip(),
         "filter": args.filter,
         "particles": args.particles,
         "seed": args.seed,

@@ -38,7 +38,7 @@ def summarize(core, reader, name, present, read, undecodable, truth_wrong_frame,
     compared update, errors (K, 6), filter standard deviations (K, 6))`` for the figure.
 
     ``updates`` are ``(stamp ns, mean (6,), covariance (6, 6))`` of each filter update, ``truth`` maps a
-    stamp [ns] to the true state ``(6,)``; the rest is the replay's state (see :mod:`gpf_nav.ros.replay`).
+    stamp [ns] to the true state ``(6,)``; the rest is the replay's state (see :mod:`gpf_nav.bags.replay`).
     """
     from gpf_nav.experiments.metrics import error_norms, nees, rmse
     c = core.engine.counters

@@ -20,7 +20,7 @@ graph and no waiting:
   (per-axis error and 3-sigma bounds) when the bag has truth.
 
 Truth is compared with the estimate of every filter update (the posterior at each measurement stamp),
-interpolated between truth samples at most 1 s apart (:mod:`gpf_nav.ros.replay_report`); truth
+interpolated between truth samples at most 1 s apart (:mod:`gpf_nav.bags.replay_report`); truth
 messages in another frame than ``world_frame`` are not used. Exit status 2, after one line on stderr, on invalid
 parameters, an unreadable or truncated bag, a topic of the wrong type, or no measurement topic.
 """
@@ -38,13 +38,13 @@ import numpy as np
 from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
 
-from gpf_nav.cli import CommandParser
-from gpf_nav.ros.bag import (STORAGES, BagError, BagReader, BagWriter, absolute, deserialize,
+from gpf_nav.arguments import CommandParser
+from gpf_nav.bags.bag import (STORAGES, BagError, BagReader, BagWriter, absolute, deserialize,
                              header_stamp_ns, qos_profile, type_name)
 from gpf_nav.ros.conversions import odometry_state, stamp_to_ns
 from gpf_nav.ros.estimator_core import INPUT_TOPICS, OUTPUT_TOPICS, EstimatorCore
-from gpf_nav.ros.params import ESTIMATOR, ParameterError, Spec, parameters_from_files
-from gpf_nav.ros.replay_report import print_summary, summarize
+from gpf_nav.estimator.params import ESTIMATOR, ParameterError, Spec, parameters_from_files
+from gpf_nav.bags.replay_report import print_summary, summarize
 
 TRUTH_TOPIC = "truth/odometry"
 CLOCK_TOPIC = "/clock"

@@ -1,7 +1,7 @@
 """The estimator's logic without ROS: timing, initialisation, IMU input, recovery, counters.
 
 :class:`EstimatorEngine` is what ``estimator_node`` drives; the node only converts messages, applies
-the message-level checks of :mod:`gpf_nav.ros.validation` and publishes. Times are integer nanoseconds
+the message-level checks of :mod:`gpf_nav.estimator.validation` and publishes. Times are integer nanoseconds
 of ROS time. Rules:
 
 * A measurement at stamp ``t`` runs ``predict((t - t_filter) s, u)`` then ``update(y)``, ``u`` being the
@@ -11,7 +11,7 @@ of ROS time. Rules:
 * Initialisation, first match wins: the ``initial_state`` parameter (at ``initial_stamp``, or at the
   first measurement when that is negative); a ``set_state`` (full state) or ``set_pose`` (position)
   message; else the first ``init_window`` measurements through
-  :func:`gpf_nav.ros.initialization.batch_initial_state`. A ``set_state`` or ``set_pose`` that comes
+  :func:`gpf_nav.estimator.initialization.batch_initial_state`. A ``set_state`` or ``set_pose`` that comes
   while measurements are buffered for that fit (say the latched prior, delivered just after the first
   live measurement) is not stale: the filter starts from it and then takes the buffered measurements
   stamped at or after it.
@@ -34,8 +34,8 @@ from typing import Callable
 import numpy as np
 
 from gpf_nav.integrity import CostateMonitor, IntegrityStatus
-from gpf_nav.ros.initialization import batch_initial_state
-from gpf_nav.ros.validation import Counters, RateLimiter, check_timing
+from gpf_nav.estimator.initialization import batch_initial_state
+from gpf_nav.estimator.validation import Counters, RateLimiter, check_timing
 
 NS = 1_000_000_000
 LEVEL_RANK = {"OK": 0, "WARN": 1, "FAULT": 2}

@@ -1,7 +1,7 @@
 """Node-latency benchmark: measurement message published -> matching ``odometry/filtered`` received.
 
     gpf-nav bench --node [--json] [-- --rates 10,50,200 --particles 500,10000 --seconds 5]
-    python -m gpf_nav.ros.latency ...
+    python -m gpf_nav.tools.latency ...
 
 For each particle count the estimator runs as a separate process (``python -m
 gpf_nav.ros.estimator_node``, the same code as the installed ``estimator``), initialised from the
@@ -27,8 +27,8 @@ import time
 
 import numpy as np
 
-from gpf_nav.cli import CommandParser, positive_float
-from gpf_nav.ros.factory import FILTERS
+from gpf_nav.arguments import CommandParser, positive_float
+from gpf_nav.estimator.factory import FILTERS
 
 DEFAULT_RATES = (10.0, 50.0, 200.0)
 DEFAULT_PARTICLES = (500, 10000)

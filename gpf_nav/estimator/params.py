@@ -1,10 +1,9 @@
 """Parameters of the two nodes: names, defaults, units and descriptions in one table each.
 
 ``config/estimator.yaml`` and ``config/simulator.yaml`` repeat the defaults (a test checks they agree).
-:func:`declare` declares a table on a node (numbers with dynamic typing, so ``1`` in a YAML file is
-accepted for a float) and returns the values coerced to the default's type; a value of the wrong type
-raises :class:`ParameterError` naming the parameter. No parameter may be changed at run time except
-those marked ``live``.
+:func:`gpf_nav.ros.parameters.declare` declares a table on a node and :func:`coerce` converts each value
+to the default's type; a value of the wrong type raises :class:`ParameterError` naming the parameter.
+No parameter may be changed at run time except those marked ``live``. No ROS here.
 """
 from __future__ import annotations
 
@@ -147,27 +146,6 @@ def simulator_specs() -> list[Spec]:
     return specs
 
 
-def declare(node, specs: list[Spec]) -> dict:
-    """Declare ``specs`` on ``node`` and return ``{name: value}`` coerced to the defaults' types."""
-    from rcl_interfaces.msg import ParameterDescriptor
-    from rclpy.exceptions import ParameterUninitializedException
-    values = {}
-    for spec in specs:
-        numeric = isinstance(spec.default, (int, float)) and not isinstance(spec.default, bool)
-        descriptor = ParameterDescriptor(description=spec.description, read_only=not spec.live,
-                                         dynamic_typing=numeric or spec.default is None)
-        if spec.default is None:  # no default, any numeric list: declared NOT_SET with dynamic typing
-            node.declare_parameter(spec.name, None, descriptor)
-            try:
-                value = node.get_parameter(spec.name).value
-            except ParameterUninitializedException:
-                value = None
-        else:
-            value = node.declare_parameter(spec.name, spec.default, descriptor).value
-        values[spec.name] = coerce(spec, value)
-    return values
-
-
 def coerce(spec: Spec, value):
     """``value`` converted to the type of ``spec.default``; ParameterError when it cannot be."""
     default = spec.default
@@ -206,7 +184,8 @@ def parameters_from_files(specs: list[Spec], node_name: str, params_files=(), as
     """``{name: value}`` of ``specs`` without a node: defaults, then each ROS 2 params file in turn (the
     sections ``/**``, ``node_name`` and ``/node_name``, nested names joined with ``.``), then each
     ``name:=value`` assignment (value parsed as YAML, as ``--ros-args -p`` does). Values are coerced as
-    :func:`declare` does; an unknown name or a malformed file raises :class:`ParameterError`."""
+    :func:`gpf_nav.ros.parameters.declare` does; an unknown name or a malformed file raises
+    :class:`ParameterError`."""
     import yaml
     known = {spec.name: spec for spec in specs}
     given: dict = {}
