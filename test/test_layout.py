@@ -1,4 +1,4 @@
-"""The package's floors (docs/ros.md, *Layout*): a module imports only from its own floor or below, and
+"""The package's floors (docs/ros.md, top): a module imports only from its own floor or below, and
 nothing below gpf_nav/ros imports rclpy or a ROS message package. Read from the source (every import
 statement, lazy ones included), so it needs no ROS."""
 from __future__ import annotations
