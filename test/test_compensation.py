@@ -6,6 +6,7 @@ import pytest
 from gpf_nav.filters import CompensatedEKF, ExtendedKF, GeometricProjectionPF
 from gpf_nav.filters.model_averaging import mixture_moments
 from gpf_nav.models import LinearGaussianModel, LunarDescentModel
+from gpf_nav.models.lunar import MOON_RADIUS, MU_MOON
 from gpf_nav.models.compensation import ModelErrorCompensation
 from linear_reference import kalman, simulate
 
@@ -267,3 +268,64 @@ def test_model_average_follows_every_step_and_set_moments():
         assert f.model_probabilities[0] == probability and np.array_equal(f.mean, mean)
     f.set_moments(np.array([5.0, 0.0, 0.0]), np.diag([1.0, 1.0, 1e-4]))
     assert np.array_equal(f.mean, fresh()[1]) and f.mean[0] == pytest.approx(5.0)
+
+
+def _gated_ekf_after_clean_steps(**options) -> tuple[CompensatedEKF, np.random.Generator]:
+    """A compensated EKF on the lunar model after 20 clean 2 s steps (truth: gravity x 1.09)."""
+    model, truth = LunarDescentModel(), LunarDescentModel(mu_scale=1.09)
+    r0 = MOON_RADIUS + 100e3
+    x = np.array([r0, 0.0, 0.0, 0.0, np.sqrt(MU_MOON / r0), 0.0])
+    f = CompensatedEKF(model, **options)
+    f.initialize(x, np.diag([1e6] * 3 + [1.0] * 3))
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        x = truth.transition(x[None], 2.0)[0]
+        f.predict(2.0)
+        f.update(model.measure(x[None])[0] + rng.normal(size=3) * [30.0, 5e-4, 5e-4])
+    return f, rng
+
+
+def _range_sigma(f: CompensatedEKF) -> tuple[np.ndarray, float]:
+    """The measurement the filter expects ``(3,)`` and the std of its range innovation, m."""
+    h, H = f.model.measure_and_jacobian(f.augmented_mean[None], f.time)
+    S = H[0] @ f.augmented_covariance @ H[0].T + f.model.measurement_noise()
+    return h[0], float(np.sqrt(S[0, 0]))
+
+
+def test_gated_compensated_ekf_refuses_a_20_sigma_outlier_and_only_it():
+    """With the GPF's gate, a range 20 innovation sigmas off is left out: the update is exactly the one
+    without that range (the angles still used); without the gate (the default) the range is used."""
+    gated, _ = _gated_ekf_after_clean_steps(outlier_gate=6.0)
+    twin, _ = _gated_ekf_after_clean_steps(outlier_gate=6.0)
+    plain, _ = _gated_ekf_after_clean_steps()
+    for f in (gated, twin, plain):
+        f.predict(2.0)
+    y, sigma = _range_sigma(gated)
+    y[0] += 20.0 * sigma
+    gated.update(y)
+    twin.update(np.array([np.nan, y[1], y[2]]))
+    plain.update(y)
+    assert gated.gated == 1 and plain.gated == 0 and plain.outlier_gate == 0.0
+    assert np.array_equal(gated.augmented_mean, twin.augmented_mean)
+    assert np.array_equal(gated.augmented_covariance, twin.augmented_covariance)
+    assert np.linalg.norm(plain.mean[:3] - gated.mean[:3]) > 3.0 * sigma
+    gated.predict(2.0)
+    y, sigma = _range_sigma(gated)
+    gated.update(y + [3.0 * sigma, 0.0, 0.0])  # 3 sigma: inside the gate, used
+    assert gated.gated == 1
+
+
+def test_gated_compensated_ekf_uses_a_component_refused_outlier_gate_limit_times_in_a_row():
+    """A range that stays 20 sigmas off is refused outlier_gate_limit times, then used; a good range
+    resets the count (the GPF's rule, from the same code)."""
+    f, _ = _gated_ekf_after_clean_steps(outlier_gate=6.0, outlier_gate_limit=3)
+    gated = []
+    for step in range(6):
+        f.predict(2.0)
+        y, sigma = _range_sigma(f)
+        y[0] += 0.0 if step == 4 else 20.0 * sigma
+        f.update(y)
+        gated.append(f.gated)
+    assert gated == [1, 2, 3, 3, 3, 4]
+    with pytest.raises(ValueError):
+        CompensatedEKF(LunarDescentModel(), outlier_gate=-1.0)

@@ -37,6 +37,8 @@ GPF_MULTIPLE_MODEL = "GPF multiple-model (nominal or compensated)"
 """``MultipleModelGPF(model)``: IMM of the GPF on the nominal and on the compensated model."""
 EKF_COMPENSATED = "EKF + compensation"
 """EKF with the same unmodelled-acceleration compensation and tuning as :data:`GPF_NAV`."""
+EKF_COMPENSATED_GATED = "EKF + compensation, gated"
+""":data:`EKF_COMPENSATED` with the GPF's innovation gate too (same gate and limit as :data:`GPF_NAV`)."""
 PAPER_GPF = {"metric": "euclidean", "weighting": "likelihood", "unmodelled_acceleration_std": 0.0}
 """Options of the paper's GPF rows on top of :class:`GeometricProjectionPF`'s defaults."""
 
@@ -80,11 +82,14 @@ def _make_filter(name: str, model, n_particles: int, seed):
     """Construct the filter named ``name`` (one of :data:`FILTERS`, :data:`EXTRA_FILTERS` or an oracle
     grid member)."""
     from gpf_nav.filters import BootstrapPF, CompensatedEKF, GeometricProjectionPF, MultipleModelGPF
+    from gpf_nav.filters.gating import OUTLIER_GATE, OUTLIER_GATE_LIMIT
 
     if name == GPF_NAV:
         return GeometricProjectionPF(model, n_particles, seed=seed)
     if name == EKF_COMPENSATED:
         return CompensatedEKF(model, seed=seed)
+    if name == EKF_COMPENSATED_GATED:
+        return CompensatedEKF(model, seed=seed, outlier_gate=OUTLIER_GATE, outlier_gate_limit=OUTLIER_GATE_LIMIT)
     if name == GPF_MULTIPLE_MODEL:
         return MultipleModelGPF(model, n_particles, seed=seed)
     if name == GPF_DEFAULT:
@@ -133,13 +138,14 @@ PAPER_FILTERS = (GPF_DEFAULT, GPF_PRINTED, GPF_EXACT, "SPF", "EKF", "UKF", "EnKF
 FILTERS = (GPF_NAV, EKF_COMPENSATED, "EKF, oracle-tuned Q", "UKF, oracle-tuned Q") + PAPER_FILTERS
 """The rows of the Monte Carlo table and the sweeps: the navigation-grade GPF, its fair baselines
 (the same compensation; oracle-tuned process noise), then the paper's rows."""
-EXTRA_FILTERS = (GPF_MULTIPLE_MODEL, GPF_QMETRIC)
+EXTRA_FILTERS = (GPF_MULTIPLE_MODEL, GPF_QMETRIC, EKF_COMPENSATED_GATED)
 """Filters that can be asked for with ``--filters`` but are not part of the default campaign."""
 PARTICLE_FILTERS = (GPF_NAV, GPF_MULTIPLE_MODEL, GPF_DEFAULT, GPF_PRINTED, GPF_EXACT, GPF_QMETRIC, "SPF")
 """Filters that have an ESS and a co-state."""
 
 
-ALIASES = {"gpf": GPF_NAV, "gpf-mm": GPF_MULTIPLE_MODEL, "ekf-comp": EKF_COMPENSATED, "ekf-oracle": "EKF, oracle-tuned Q",
+ALIASES = {"gpf": GPF_NAV, "gpf-mm": GPF_MULTIPLE_MODEL, "ekf-comp": EKF_COMPENSATED,
+           "ekf-comp-gated": EKF_COMPENSATED_GATED, "ekf-oracle": "EKF, oracle-tuned Q",
            "ukf-oracle": "UKF, oracle-tuned Q", "gpf-paper": GPF_DEFAULT, "gpf-printed": GPF_PRINTED,
            "gpf-exact": GPF_EXACT, "gpf-qmetric": GPF_QMETRIC, "spf": "SPF", "ekf": "EKF", "ukf": "UKF",
            "enkf": "EnKF"}

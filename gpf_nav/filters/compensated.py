@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from gpf_nav.filters.gating import OUTLIER_GATE_LIMIT
 from gpf_nav.filters.kalman import ExtendedKF
 from gpf_nav.filters.model_averaging import NOMINAL_PRIOR, mixture_moments, model_average
 from gpf_nav.models.base import StateSpaceModel
@@ -140,10 +141,14 @@ class CompensatedEKF(ModelErrorCompensated, ExtendedKF):
         nominal_prior: prior probability of the nominal model in the estimate (0: the compensated
             posterior as it is).
         seed: seed of the filter's random stream.
+        outlier_gate: innovation gate in standard deviations, the GPF's (:mod:`gpf_nav.filters.gating`);
+            0 (default) disables it.
+        outlier_gate_limit: consecutive refusals of a component after which it is used anyway.
     """
 
     def __init__(self, model: StateSpaceModel, unmodelled_acceleration_std: float = UNMODELLED_ACCELERATION_STD,
                  unmodelled_acceleration_time: float = UNMODELLED_ACCELERATION_TIME,
-                 nominal_prior: float = NOMINAL_PRIOR, seed: int | np.random.Generator | None = None):
+                 nominal_prior: float = NOMINAL_PRIOR, seed: int | np.random.Generator | None = None,
+                 outlier_gate: float = 0.0, outlier_gate_limit: int = OUTLIER_GATE_LIMIT):
         super().__init__(self._compensate(model, unmodelled_acceleration_std, unmodelled_acceleration_time,
-                                          nominal_prior), seed)
+                                          nominal_prior), seed, outlier_gate, outlier_gate_limit)

@@ -38,6 +38,7 @@ import numpy as np
 
 from gpf_nav.filters.compensated import (UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME,
                                          ModelErrorCompensated)
+from gpf_nav.filters.gating import OUTLIER_GATE, OUTLIER_GATE_LIMIT, InnovationGated
 from gpf_nav.filters.kernel import default_bandwidth, map_moments, match_moments, paired_moments, shrink
 from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
 from gpf_nav.filters.particle import ParticleFilter, gaussian_shift_correction, select_rows
@@ -48,17 +49,13 @@ from gpf_nav.models.base import StateSpaceModel
 REFERENCES = ("innovation", "increment")
 METRICS = ("cloud", "euclidean", "process_noise")
 WEIGHTINGS = ("corrected", "likelihood")
-OUTLIER_GATE = 6.0
-"""Default innovation gate of the cloud metric, standard deviations."""
-OUTLIER_GATE_LIMIT = 5
-"""Default number of consecutive refusals of a component after which it is used anyway."""
 ILL_CONDITIONED = 1e12
 """Cloud metric: ``trace(S) / eps`` beyond which the projection is skipped (the update only weights)."""
 DEFAULT_REGULARIZATION = {"cloud": 1.0, "euclidean": 1e-6, "process_noise": 1e-6}
 """Tikhonov ``eps`` of each metric when none is given (1: the measurement noise itself, for ``cloud``)."""
 
 
-class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
+class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilter):
     """GPF: the SMC loop with the geometric projection proposal.
 
     ``GeometricProjectionPF(model)`` is the navigation-grade configuration (cloud metric, exact weights,
@@ -125,9 +122,6 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
             raise ValueError(f"regularization must be positive, got {regularization}")
         if kernel_bandwidth is not None and not 0.0 < float(kernel_bandwidth) < 1.0:
             raise ValueError(f"kernel_bandwidth must lie in (0, 1), got {kernel_bandwidth}")
-        if not (outlier_gate >= 0.0 and int(outlier_gate_limit) >= 0):
-            raise ValueError(f"outlier_gate and outlier_gate_limit must be >= 0, got {outlier_gate}, "
-                             f"{outlier_gate_limit}")
         model = self._compensate(model, unmodelled_acceleration_std, unmodelled_acceleration_time, nominal_prior)
         super().__init__(model, n_particles, resampling, ess_threshold, seed, collapse_steps)
         self.reference = reference
@@ -141,10 +135,7 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
         self._proposal = None
         self._moment_target = None
         self.moment_matching = bool(moment_matching)
-        self.outlier_gate = float(outlier_gate)
-        self.outlier_gate_limit = int(outlier_gate_limit)
-        self.gated = 0
-        self._gate_streak = np.zeros(model.measurement_dim, dtype=int)
+        self._init_gate(outlier_gate, outlier_gate_limit, model.measurement_dim)  # (gating.py)
 
     def initialize(self, mean, cov, t0=0.0):
         super().initialize(mean, cov, t0)
@@ -252,33 +243,6 @@ class GeometricProjectionPF(ModelErrorCompensated, ParticleFilter):
             return None
         L = cholesky_or_none(S, symmetric=True)
         return None if L is None else (G, wr, S, triangular_inverse(L))
-
-    def _gate(self, innovation: np.ndarray, S: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        """The measured ``rows`` less the outliers: a component whose cloud-mean innovation (whitened,
-        ``(k,)``) is beyond ``outlier_gate`` standard deviations of ``S`` ``(k, k)`` is left out, unless it
-        has been left out ``outlier_gate_limit`` times in a row (then the filter, not the sensor, is
-        taken to be off, and the component is used until one passes the gate again). Returns ``rows``
-        itself when no component is left out."""
-        if not self.outlier_gate:
-            return rows
-        # a few components: Python floats cost less than numpy calls on arrays of three
-        limits = [self.outlier_gate * math.sqrt(s) for s in S.diagonal().tolist()]
-        outlier = [abs(v) > limit for v, limit in zip(innovation.tolist(), limits)]
-        streak = self._gate_streak
-        if not any(outlier):
-            streak[rows] = 0
-            return rows
-        refused = []
-        for i, is_outlier in zip(np.flatnonzero(rows).tolist(), outlier):  # a few components
-            streak[i] = streak[i] + 1 if is_outlier else 0
-            if is_outlier and streak[i] <= self.outlier_gate_limit:
-                refused.append(i)
-        if not refused:
-            return rows
-        self.gated += len(refused)
-        used = rows.copy()
-        used[refused] = False
-        return used
 
     def _after_weighting(self, resampling):
         """Cloud metric: replace the sampling noise of the weighted mean and covariance by their exact

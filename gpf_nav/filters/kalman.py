@@ -11,6 +11,7 @@ import numpy as np
 from scipy.linalg.lapack import dposv, dpotrf
 
 from gpf_nav.filters.base import Filter
+from gpf_nav.filters.gating import OUTLIER_GATE_LIMIT, InnovationGated
 from gpf_nav.linalg import psd_sqrt
 from gpf_nav.models.base import StateSpaceModel
 
@@ -140,17 +141,27 @@ class _GaussianFilter(Filter):
 
 
 
-class ExtendedKF(_GaussianFilter):
+class ExtendedKF(InnovationGated, _GaussianFilter):
     """Extended Kalman filter: transition and measurement linearised about the current mean.
 
     The update uses the measured rows only, wraps angular residuals through ``model.residual`` and
     writes the covariance in Joseph form, symmetrised. The small products are ``ndarray.dot`` (less call
     overhead than ``@`` on ``n x n`` matrices: the EKF's step is a few dozen such calls).
+
+    Args:
+        model: the state-space model.
+        seed: seed of the filter's random stream (the EKF itself draws nothing).
+        outlier_gate: a measured component whose innovation is beyond this many standard deviations of
+            ``S = H P H^T + R`` is not used (counted in :attr:`gated`), the GPF's gate
+            (:mod:`gpf_nav.filters.gating`); 0 (default) disables it.
+        outlier_gate_limit: consecutive refusals of a component after which it is used anyway.
     """
 
-    def __init__(self, model: StateSpaceModel, seed: int | np.random.Generator | None = None):
+    def __init__(self, model: StateSpaceModel, seed: int | np.random.Generator | None = None,
+                 outlier_gate: float = 0.0, outlier_gate_limit: int = OUTLIER_GATE_LIMIT):
         super().__init__(model, seed)
         self._eye = np.eye(model.state_dim)
+        self._init_gate(outlier_gate, outlier_gate_limit, model.measurement_dim)
 
     def predict(self, dt: float, u: np.ndarray | None = None) -> None:
         """``x <- f(x)``, ``P <- F P F^T + Q(dt)``; ``dt == 0`` leaves the estimate unchanged."""
@@ -183,6 +194,13 @@ class ExtendedKF(_GaussianFilter):
         HP = H.dot(P)
         S = HP.dot(H.T)
         S += R
+        used = self._gate(r, S, mask)
+        if used is not mask:  # outliers left out
+            if not used.any():
+                self.last_log_likelihood = 0.0
+                return
+            keep = used[mask]
+            r, H, HP, S, R = r[keep], H[keep], HP[keep], S[np.ix_(keep, keep)], self._noise.measurement(used)
         try:
             Kt, _, self.last_log_likelihood = innovation_solve(S, HP, r)
         except np.linalg.LinAlgError:

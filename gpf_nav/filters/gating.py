@@ -1,0 +1,69 @@
+"""The innovation gate every filter that refuses outliers shares (the GPF's cloud metric, the gated EKF).
+
+A measured component whose innovation is beyond ``outlier_gate`` standard deviations of the innovation
+covariance is not used, unless it has been refused ``outlier_gate_limit`` times in a row: then the
+filter, not the sensor, is taken to be off, and the component is used until one passes the gate again.
+``outlier_gate = 0`` disables the gate.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+OUTLIER_GATE = 6.0
+"""Default innovation gate of the navigation-grade filters, standard deviations."""
+OUTLIER_GATE_LIMIT = 5
+"""Default number of consecutive refusals of a component after which it is used anyway."""
+
+
+class InnovationGated:
+    """Mixin of a filter with an innovation gate: call :meth:`_init_gate` in ``__init__`` and
+    :meth:`_gate` in the update.
+
+    Attributes:
+        outlier_gate: the gate, standard deviations of the innovation (0: no gate).
+        outlier_gate_limit: consecutive refusals of a component after which it is used anyway.
+        gated: components refused so far.
+    """
+
+    outlier_gate: float
+    outlier_gate_limit: int
+    gated: int
+
+    def _init_gate(self, outlier_gate: float, outlier_gate_limit: int, measurement_dim: int) -> None:
+        """Set the gate for ``measurement_dim`` components; ValueError when either option is negative."""
+        if not (outlier_gate >= 0.0 and int(outlier_gate_limit) >= 0):
+            raise ValueError(f"outlier_gate and outlier_gate_limit must be >= 0, got {outlier_gate}, "
+                             f"{outlier_gate_limit}")
+        self.outlier_gate = float(outlier_gate)
+        self.outlier_gate_limit = int(outlier_gate_limit)
+        self.gated = 0
+        self._gate_streak = np.zeros(measurement_dim, dtype=int)
+
+    def _gate(self, innovation: np.ndarray, S: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """The measured ``rows`` ``(m,)`` bool less the outliers: a component whose innovation
+        (``(k,)``, one per measured row, in any units that ``S`` shares) is beyond ``outlier_gate``
+        standard deviations of the innovation covariance ``S`` ``(k, k)`` is left out, unless it has
+        been left out ``outlier_gate_limit`` times in a row. Returns ``rows`` itself when no component
+        is left out (and always when the gate is off)."""
+        if not self.outlier_gate:
+            return rows
+        # a few components: Python floats cost less than numpy calls on arrays of three
+        limits = [self.outlier_gate * math.sqrt(s) for s in S.diagonal().tolist()]
+        outlier = [abs(v) > limit for v, limit in zip(innovation.tolist(), limits)]
+        streak = self._gate_streak
+        if not any(outlier):
+            streak[rows] = 0
+            return rows
+        refused = []
+        for i, is_outlier in zip(np.flatnonzero(rows).tolist(), outlier):  # a few components
+            streak[i] = streak[i] + 1 if is_outlier else 0
+            if is_outlier and streak[i] <= self.outlier_gate_limit:
+                refused.append(i)
+        if not refused:
+            return rows
+        self.gated += len(refused)
+        used = rows.copy()
+        used[refused] = False
+        return used
