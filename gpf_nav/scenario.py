@@ -1,7 +1,8 @@
 """Lunar-descent truth and measurement generator of the paper's Section 7 (no ROS).
 
 :func:`generate` integrates the truth under the mismatched gravity ``mu (1 + epsilon)`` and draws the
-range/azimuth/elevation measurements, the prior and the dropouts from independent seeded streams;
+range/azimuth/elevation measurements, the prior, the dropouts and the outliers from independent seeded
+streams;
 :func:`load_csv` replays a recorded truth instead. Every choice the paper leaves open is a field of
 :class:`ScenarioConfig` (defaults in ``config/scenario.yaml``, rationale in ``docs/scenario.md``).
 All quantities are SI (m, m/s, m/s^2, s, rad) unless a field name ends in ``_deg``.
@@ -18,7 +19,7 @@ import numpy as np
 from gpf_nav.models.base import wrap_angle
 from gpf_nav.models.lunar import MOON_RADIUS, MU_MOON, LunarDescentModel
 
-CASES = ("full", "partial")
+CASES = ("full", "partial", "range")
 ORBIT_DESIGNS = ("truth", "filter")
 _CSV_HEADER = "t,x,y,z,vx,vy,vz,ax,ay,az"
 
@@ -56,9 +57,16 @@ class ScenarioConfig:
         station: observer position ``(3,)``, m (the Moon's centre).
         prior_position_std: prior standard deviation of each position component, m.
         prior_velocity_std: prior standard deviation of each velocity component, m/s.
-        case: ``"full"`` (range, azimuth, elevation) or ``"partial"`` (azimuth never measured).
+        case: ``"full"`` (range, azimuth, elevation), ``"partial"`` (azimuth never measured) or
+            ``"range"`` (range only: azimuth and elevation never measured).
         measurement_noise_scale: multiplies both noise standard deviations (noise sweeps).
         dropout_probability: probability that a whole measurement vector is lost (all NaN).
+        outlier_probability: probability that one component of a measurement is an outlier (each
+            component of each vector independently).
+        outlier_size: an outlier's extra error, in standard deviations of its channel (after
+            ``measurement_noise_scale``), with a random sign.
+        measurement_bias_sigma: a constant error ``(3,)`` added to range, azimuth and elevation, in
+            standard deviations of each channel (after ``measurement_noise_scale``).
         thrust: None for a coasting descent, else the magnitude (m/s^2) of a retrograde specific force
             ``-thrust v / |v|`` evaluated at the start of each step and held over it.
         thrust_known: the filters are given the thrust as the IMU's specific force (default); False
@@ -87,6 +95,9 @@ class ScenarioConfig:
     case: str = "full"
     measurement_noise_scale: float = 1.0
     dropout_probability: float = 0.0
+    outlier_probability: float = 0.0
+    outlier_size: float = 20.0
+    measurement_bias_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
     thrust: float | None = None
     thrust_known: bool = True
     disturbance: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -98,6 +109,10 @@ class ScenarioConfig:
             raise ValueError(f"orbit_design must be one of {ORBIT_DESIGNS}, got {self.orbit_design!r}")
         if not 0.0 <= self.dropout_probability <= 1.0:
             raise ValueError("dropout_probability must lie in [0, 1]")
+        if not 0.0 <= self.outlier_probability <= 1.0:
+            raise ValueError("outlier_probability must lie in [0, 1]")
+        if not 0.0 <= self.outlier_size < math.inf:
+            raise ValueError("outlier_size must be finite and non-negative")
         if min(self.dt, self.truth_step, self.range_noise_std, self.angle_noise_std,
                self.measurement_noise_scale, self.prior_position_std, self.prior_velocity_std) <= 0:
             raise ValueError("dt, truth_step, noise and prior standard deviations and the noise scale "
@@ -110,8 +125,10 @@ class ScenarioConfig:
             raise ValueError("need 0 < perilune_altitude <= apolune_altitude")
         if len(self.station) != 3:
             raise ValueError("station must have three components")
-        if len(self.disturbance) != 3 or not all(math.isfinite(a) for a in self.disturbance):
-            raise ValueError("disturbance must have three finite components")
+        for name in ("disturbance", "measurement_bias_sigma"):
+            value = getattr(self, name)
+            if len(value) != 3 or not all(math.isfinite(a) for a in value):
+                raise ValueError(f"{name} must have three finite components")
 
     @property
     def steps(self) -> int:
@@ -119,10 +136,10 @@ class ScenarioConfig:
         return int(math.floor(self.duration / self.dt + 1e-9))
 
     def to_dict(self) -> dict:
-        """Plain dict of the fields (``station`` and ``disturbance`` as lists)."""
+        """Plain dict of the fields (the tuples as lists)."""
         out = dataclasses.asdict(self)
-        out["station"] = list(self.station)
-        out["disturbance"] = list(self.disturbance)
+        for name in ("station", "disturbance", "measurement_bias_sigma"):
+            out[name] = list(getattr(self, name))
         return out
 
     @classmethod
@@ -245,17 +262,20 @@ def initial_state(config: ScenarioConfig) -> np.ndarray:
 
 
 def _streams(seed: int) -> list[np.random.Generator]:
-    """Independent generators for truth noise, measurement noise, prior and dropouts (in that order)."""
-    return [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4)]
+    """Independent generators for truth noise, measurement noise, prior, dropouts and outliers (in that
+    order; the first four are the children a four-stream spawn gave, so adding the fifth changed no
+    draw of theirs)."""
+    return [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(5)]
 
 
 def generate(config: ScenarioConfig, seed: int) -> Scenario:
-    """Integrate the truth, draw measurements, dropouts and prior; same seed gives identical arrays.
+    """Integrate the truth, draw measurements, dropouts, outliers and prior; same seed gives identical
+    arrays.
 
     Raises:
         ValueError: if the truth reaches the lunar surface within ``config.duration``.
     """
-    truth_rng, meas_rng, prior_rng, drop_rng = _streams(seed)
+    truth_rng, *measurement_streams = _streams(seed)
     model = truth_model(config)
     steps = config.steps
     dt = config.dt
@@ -271,7 +291,7 @@ def generate(config: ScenarioConfig, seed: int) -> Scenario:
         raise ValueError(f"truth reaches the lunar surface at t = {hit:.0f} s; shorten duration "
                          f"or use orbit_design='truth'")
     times = dt * np.arange(1, steps + 1)
-    return _finish(config, times, truth, force, model, meas_rng, prior_rng, drop_rng, 0.0)
+    return _finish(config, times, truth, force, model, *measurement_streams, 0.0)
 
 
 def _integrate_truth(x0: np.ndarray, steps: int, dt: float, substeps: int, gm: float,
@@ -324,14 +344,22 @@ def _integrate_truth(x0: np.ndarray, steps: int, dt: float, substeps: int, gm: f
 
 def _finish(config: ScenarioConfig, times: np.ndarray, truth: np.ndarray, force: np.ndarray,
             model: LunarDescentModel, meas_rng: np.random.Generator, prior_rng: np.random.Generator,
-            drop_rng: np.random.Generator, start_time: float) -> Scenario:
-    """Draw measurements (noise from ``model``), case mask, dropouts and prior; assemble the Scenario."""
+            drop_rng: np.random.Generator, outlier_rng: np.random.Generator, start_time: float) -> Scenario:
+    """Draw measurements (noise from ``model``), bias, outliers, case mask, dropouts and prior; assemble
+    the Scenario."""
     steps = times.shape[0]
     std = np.sqrt(np.diag(model.measurement_noise()))
     y = model.measure(truth[1:]) + meas_rng.standard_normal((steps, 3)) * std
+    if any(config.measurement_bias_sigma):
+        y += np.asarray(config.measurement_bias_sigma) * std
+    if config.outlier_probability > 0.0:
+        hit, sign = outlier_rng.random((2, steps, 3))  # the same draws for any probability and size
+        y += np.where(hit < config.outlier_probability, config.outlier_size, 0.0) * np.where(sign < 0.5, -std, std)
     y[:, 1] = wrap_angle(y[:, 1])
-    if config.case == "partial":
+    if config.case != "full":
         y[:, 1] = np.nan
+    if config.case == "range":
+        y[:, 2] = np.nan
     y[drop_rng.random(steps) < config.dropout_probability] = np.nan
     if not config.thrust_known:
         force = np.zeros_like(force)
@@ -343,13 +371,13 @@ def _finish(config: ScenarioConfig, times: np.ndarray, truth: np.ndarray, force:
 
 
 def load_csv(path: str | Path, config: ScenarioConfig = ScenarioConfig(), seed: int = 0) -> Scenario:
-    """Replay a recorded truth; measurements, dropouts and prior are drawn as in :func:`generate`.
+    """Replay a recorded truth; measurements, dropouts, outliers and prior are drawn as in :func:`generate`.
 
     The file has rows ``t, x, y, z, vx, vy, vz[, ax, ay, az]`` (SI, optional header line, strictly
     increasing ``t``). Row ``k``'s ``a`` columns are the specific force held over ``[t_k, t_{k+1}]``
     (the last row's are unused). Measurements come from :func:`filter_model` noise at rows ``1..K``.
     ``config.duration``, ``dt`` and the orbit fields are ignored; the same ``seed`` gives the same
-    measurement noise, prior and dropouts as :func:`generate` would.
+    measurement noise, prior, dropouts and outliers as :func:`generate` would.
     """
     with open(path) as f:
         first = f.readline().split(",")[0].strip()
@@ -365,9 +393,8 @@ def load_csv(path: str | Path, config: ScenarioConfig = ScenarioConfig(), seed: 
     if np.any(np.diff(t) <= 0):
         raise ValueError("times must be strictly increasing")
     force = data[:-1, 7:10] if data.shape[1] == 10 else np.zeros((data.shape[0] - 1, 3))
-    _, meas_rng, prior_rng, drop_rng = _streams(seed)
     return _finish(config, t[1:].copy(), data[:, 1:7].copy(), np.ascontiguousarray(force),
-                   filter_model(config), meas_rng, prior_rng, drop_rng, t[0])
+                   filter_model(config), *_streams(seed)[1:], t[0])
 
 
 def save_csv(scenario: Scenario, path: str | Path) -> None:

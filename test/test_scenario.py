@@ -1,4 +1,5 @@
 """Tests of the lunar-descent scenario generator (gpf_nav.scenario)."""
+import dataclasses
 import math
 from pathlib import Path
 
@@ -132,6 +133,48 @@ def test_partial_case_never_measures_azimuth():
     assert np.all(np.isfinite(s.measurements[:, [0, 2]]))
 
 
+def test_range_case_measures_only_the_range():
+    full, ranged = generate(ScenarioConfig(), 4), generate(ScenarioConfig(case="range"), 4)
+    assert np.all(np.isnan(ranged.measurements[:, 1:]))
+    np.testing.assert_array_equal(ranged.measurements[:, 0], full.measurements[:, 0])
+    np.testing.assert_array_equal(ranged.truth, full.truth)
+
+
+def test_measurement_bias_is_a_constant_shift_in_channel_sigmas():
+    """The bias is given in standard deviations of each channel, after the noise scale; nothing else
+    changes."""
+    base = generate(ScenarioConfig(duration=400.0, measurement_noise_scale=2.0), 5)
+    biased = generate(ScenarioConfig(duration=400.0, measurement_noise_scale=2.0,
+                                     measurement_bias_sigma=(2.0, -1.0, 0.5)), 5)
+    shift = biased.measurements - base.measurements
+    np.testing.assert_allclose(shift, np.broadcast_to([120.0, -2 * math.radians(0.03),
+                                                       math.radians(0.03)], shift.shape), rtol=1e-6)
+    np.testing.assert_array_equal(biased.truth, base.truth)
+    np.testing.assert_array_equal(biased.prior_mean, base.prior_mean)
+
+
+def test_outliers_rate_size_and_their_own_stream(tmp_path):
+    """Each component is an outlier with the given probability, exactly outlier_size channel sigmas
+    off with a random sign; the other components, the truth and the prior are untouched; a larger
+    probability keeps the outliers of a smaller one (the same draws); load_csv draws the same ones."""
+    config = ScenarioConfig(duration=2400.0, outlier_probability=0.03, outlier_size=20.0)
+    base, noisy = generate(ScenarioConfig(), 6), generate(config, 6)
+    std = np.array([30.0, math.radians(0.03), math.radians(0.03)])
+    sigmas = (noisy.measurements - base.measurements) / std
+    sigmas[:, 1] = (noisy.measurements[:, 1] - base.measurements[:, 1] + math.pi) % (2 * math.pi) - math.pi
+    sigmas[:, 1] /= std[1]
+    hit = np.abs(sigmas) > 1e-6
+    np.testing.assert_allclose(np.abs(sigmas[hit]), 20.0, rtol=1e-6)
+    assert 0.3 < np.mean(sigmas[hit] > 0) < 0.7
+    assert abs(hit.mean() - 0.03) < 4 * math.sqrt(0.03 * 0.97 / hit.size)
+    np.testing.assert_array_equal(noisy.truth, base.truth)
+    np.testing.assert_array_equal(noisy.prior_mean, base.prior_mean)
+    more = generate(dataclasses.replace(config, outlier_probability=0.1), 6)
+    assert np.all(more.measurements[hit] == noisy.measurements[hit])
+    save_csv(noisy, tmp_path / "truth.csv")
+    _assert_same(load_csv(tmp_path / "truth.csv", config, 6), noisy)
+
+
 def test_dropout_rate():
     p = 0.3
     s = generate(ScenarioConfig(dropout_probability=p), 9)
@@ -192,7 +235,8 @@ def test_flat_yaml_parser(tmp_path):
 
 @pytest.mark.parametrize("kwargs", [{"case": "half"}, {"dropout_probability": 1.5}, {"dt": 0.0},
                                     {"measurement_noise_scale": 0.0}, {"orbit_design": "x"},
-                                    {"duration": 1.0}])
+                                    {"duration": 1.0}, {"outlier_probability": 1.5}, {"outlier_size": -1.0},
+                                    {"measurement_bias_sigma": (math.nan, 0.0, 0.0)}])
 def test_invalid_config(kwargs):
     with pytest.raises(ValueError):
         ScenarioConfig(**kwargs)

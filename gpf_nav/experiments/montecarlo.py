@@ -41,7 +41,8 @@ from gpf_nav.experiments.runner import (ALIASES, DEFAULT_PARTICLES, EXTRA_FILTER
 from gpf_nav.scenario import CASES, ScenarioConfig
 
 SCHEMA = "gpf_nav.montecarlo/1"
-CASE_NAMES = {"full": "Case 1 (full observability)", "partial": "Case 2 (partial observability)"}
+CASE_NAMES = {"full": "Case 1 (full observability)", "partial": "Case 2 (partial observability)",
+              "range": "Range only (azimuth and elevation never measured)"}
 NEES_PROBABILITY = 0.95
 
 # metric name in the JSON -> (key of the run summary, scale applied, description with unit)
@@ -77,7 +78,8 @@ def add_common_arguments(parser: argparse.ArgumentParser, runs: int) -> None:
     parser.add_argument("--filters", default=None,
                         help="comma-separated short names (default: gpf, ekf-comp, ekf-oracle, "
                              "ukf-oracle and the paper's seven rows gpf-paper, gpf-printed, gpf-exact, spf, "
-                             "ekf, ukf, enkf); also available: gpf-qmetric = " + ", ".join(EXTRA_FILTERS))
+                             "ekf, ukf, enkf); also available: " + ", ".join(
+                             f"{k} = {v}" for k, v in ALIASES.items() if v in EXTRA_FILTERS))
     parser.add_argument("--cases", default="full,partial", help="comma-separated cases (full,partial)")
     parser.add_argument("--divergence-km", type=positive_float, default=1000.0,
                         help="position error counted as divergence (km, default 1000)")

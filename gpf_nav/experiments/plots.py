@@ -10,13 +10,15 @@ from pathlib import Path
 import numpy as np
 
 CASE_TITLES = {"full": "Case 1: full observability (range, azimuth, elevation)",
-               "partial": "Case 2: partial observability (range, elevation; no azimuth)"}
+               "partial": "Case 2: partial observability (range, elevation; no azimuth)",
+               "range": "Range only (no azimuth, no elevation)"}
 
 _SHORT_CASE = {"full": "Case 1 (full obs.)", "partial": "Case 2 (partial obs.)"}
 
 _COLOURS = {
     "GPF navigation (default)": "#000000",
     "EKF + compensation": "#bcbd22",
+    "EKF + compensation, gated": "#808000",
     "EKF, oracle-tuned Q": "#2ca02c",
     "UKF, oracle-tuned Q": "#9467bd",
     "GPF (innovation, likelihood)": "#d62728",
