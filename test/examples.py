@@ -9,5 +9,6 @@ if str(EXAMPLES) not in sys.path:
 import bearings_only  # noqa: E402
 import bearings_only_peers  # noqa: E402
 import growth_model  # noqa: E402
+import own_sensor  # noqa: E402
 
-__all__ = ["EXAMPLES", "bearings_only", "bearings_only_peers", "growth_model"]
+__all__ = ["EXAMPLES", "bearings_only", "bearings_only_peers", "growth_model", "own_sensor"]

@@ -2,6 +2,8 @@
 
 Measurements are vectors ``y`` of shape ``(m,)``; a non-finite component (NaN) means "not measured" and
 the update uses only the measured rows. That is how partial observability reaches a filter.
+``update(y, sensor)`` conditions on the measurement of any :class:`~gpf_nav.sensors.base.Sensor` of the
+user's state; without one, on the model's own (:class:`~gpf_nav.sensors.model.ModelSensor`).
 
 Time: :attr:`Filter.time` is the elapsed time since ``initialize(mean, cov, t0)`` (``t0 + `` the sum of
 the ``dt`` predicted over); it is the ``t`` the filter passes to the model.
@@ -15,6 +17,8 @@ import numpy as np
 
 from gpf_nav.models.base import StateSpaceModel
 from gpf_nav.models.validation import validate_model
+from gpf_nav.sensors.base import Padded, Sensor
+from gpf_nav.sensors.model import ModelSensor
 
 
 COVARIANCE_LIMIT = 1e300
@@ -47,6 +51,7 @@ class Filter(ABC):
         self._last_good: tuple[np.ndarray, np.ndarray] | None = None
         self._recovering = False
         self._model_checked = False
+        self._own_sensor = ModelSensor(model)
 
     @abstractmethod
     def initialize(self, mean: np.ndarray, cov: np.ndarray, t0: float = 0.0) -> None:
@@ -57,8 +62,9 @@ class Filter(ABC):
         """Propagate the estimate over ``dt`` seconds with the known input ``u`` held constant."""
 
     @abstractmethod
-    def update(self, y: np.ndarray) -> None:
-        """Condition on measurement ``y`` ``(m,)``; NaN components are not measured."""
+    def update(self, y: np.ndarray, sensor: Sensor | None = None) -> None:
+        """Condition on measurement ``y`` ``(m,)`` of ``sensor`` (None: the model's own measurement);
+        NaN components are not measured."""
 
     @property
     @abstractmethod
@@ -139,18 +145,34 @@ class Filter(ABC):
         self.time = t0
         return mean, cov
 
-    def _check_measurement(self, y) -> tuple[np.ndarray, np.ndarray]:
+    @property
+    def sensor_state_dim(self) -> int:
+        """The state dimension sensors see (the user's: a filter that appends states of its own, such as
+        model-error compensation, says how many it keeps for the user)."""
+        return self.model.state_dim
+
+    def _sensor_for(self, sensor: Sensor | None) -> Sensor:
+        """The sensor an update uses, on the filter's own state: the model's own when None; a user's
+        sensor padded with zero Jacobian columns for the states the filter appends."""
+        if sensor is None:
+            return self._own_sensor
+        if self.sensor_state_dim < self.model.state_dim:
+            return Padded(sensor, self.sensor_state_dim, self.model.state_dim)
+        return sensor
+
+    def _check_measurement(self, y, sensor: Sensor) -> tuple[np.ndarray, np.ndarray]:
         """Return ``(y (m,), measured rows (m,) bool)``; raise ValueError on a malformed shape."""
         y = np.asarray(y, dtype=float)
-        if y.shape != (self.model.measurement_dim,):
-            raise ValueError(f"measurement must have shape ({self.model.measurement_dim},), got {y.shape}")
+        if y.shape != (sensor.dim,):
+            raise ValueError(f"measurement of sensor {sensor.name!r} must have shape ({sensor.dim},), "
+                             f"got {y.shape}")
         return y, np.isfinite(y)
 
-    def _measured_rows(self, y) -> tuple[np.ndarray, np.ndarray, int] | None:
+    def _measured_rows(self, y, sensor: Sensor) -> tuple[np.ndarray, np.ndarray, int] | None:
         """Start a Gaussian-type update: ``(y, mask, number of measured rows)``, or None (and a zero
         ``last_log_likelihood``) when nothing is measured."""
         self._require_initialized()
-        y, mask = self._check_measurement(y)
+        y, mask = self._check_measurement(y, sensor)
         k = np.count_nonzero(mask)
         if not k:
             self.last_log_likelihood = 0.0

@@ -47,6 +47,11 @@ class ModelErrorCompensated:
         return ModelErrorCompensation(model, time_constant, acceleration_std)
 
     @property
+    def sensor_state_dim(self) -> int:
+        """Sensors see the user's state (the unmodelled acceleration is the filter's own)."""
+        return self.nominal_model.state_dim
+
+    @property
     def compensated(self) -> bool:
         """True when the filter estimates an unmodelled acceleration."""
         return self.model is not self.nominal_model

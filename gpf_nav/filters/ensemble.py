@@ -59,32 +59,35 @@ class EnsembleKF(Filter):
         self.time += dt
         self._guard(False, self.mean, self.covariance)
 
-    def update(self, y: np.ndarray) -> None:
-        """Condition on ``y`` ``(m,)``; NaN rows are not measured, an all-NaN ``y`` is a no-op."""
-        measured = self._measured_rows(y)
+    def update(self, y: np.ndarray, sensor=None) -> None:
+        """Condition on ``y`` ``(m,)`` of ``sensor`` (None: the model's); NaN rows are not measured, an
+        all-NaN ``y`` is a no-op."""
+        sensor = self._sensor_for(sensor)
+        measured = self._measured_rows(y, sensor)
         if measured is None:
             return
         y, mask, k = measured
-        model, X = self.model, self._X
-        HX = model.measure(X, self.time)
-        h_mean = model.measurement_mean(HX, self._weights)
+        X = self._X
+        HX = sensor.measure(X, self.time)
+        h_mean = sensor.measurement_mean(HX, self._weights)
         # One residual call gives the anomalies Ay (N, m) of the predicted measurements and, in its last
         # row, the ensemble-mean innovation r (m,).
-        deviations = model.residual(np.vstack((HX, y)), h_mean)
+        deviations = sensor.residual(np.vstack((HX, y)), h_mean)
         Ay, r = deviations[:-1], deviations[-1]
-        innovations = model.residual(y, HX)  # (N, m)
+        innovations = sensor.residual(y, HX)  # (N, m)
         if k < mask.shape[0]:
             Ay, innovations, r = Ay[:, mask], innovations[:, mask], r[mask]
         Ax = X - np.einsum("n,ni->i", self._weights, X)
         scale = 1.0 / (self.n_particles - 1)
-        Pyy = (Ay.T @ Ay) * scale + self._noise.measurement(mask)
+        R = sensor.noise(self.time)
+        Pyy = (Ay.T @ Ay) * scale + self._noise.measurement(mask, R)
         Pxy_t = (Ay.T @ Ax) * scale  # (k, n)
         try:
             Kt, _, self.last_log_likelihood = innovation_solve(Pyy, Pxy_t, r)
         except np.linalg.LinAlgError:
             self._recover("innovation covariance not positive definite")
             return
-        innovations += self.rng.standard_normal(innovations.shape) @ self._noise.measurement_sqrt(mask).T
+        innovations += self.rng.standard_normal(innovations.shape) @ self._noise.measurement_sqrt(mask, R).T
         self._X = X + innovations @ Kt
         self._guard(True, self.mean, self.covariance)
 

@@ -31,28 +31,29 @@ class InnovationGated:
     outlier_gate_limit: int
     gated: int
 
-    def _init_gate(self, outlier_gate: float, outlier_gate_limit: int, measurement_dim: int) -> None:
-        """Set the gate for ``measurement_dim`` components; ValueError when either option is negative."""
+    def _init_gate(self, outlier_gate: float, outlier_gate_limit: int) -> None:
+        """Set the gate; ValueError when either option is negative."""
         if not (outlier_gate >= 0.0 and int(outlier_gate_limit) >= 0):
             raise ValueError(f"outlier_gate and outlier_gate_limit must be >= 0, got {outlier_gate}, "
                              f"{outlier_gate_limit}")
         self.outlier_gate = float(outlier_gate)
         self.outlier_gate_limit = int(outlier_gate_limit)
         self.gated = 0
-        self._gate_streak = np.zeros(measurement_dim, dtype=int)
+        self._gate_streaks: dict[str, np.ndarray] = {}
 
-    def _gate(self, innovation: np.ndarray, S: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    def _gate(self, innovation: np.ndarray, S: np.ndarray, rows: np.ndarray, sensor: str) -> np.ndarray:
         """The measured ``rows`` ``(m,)`` bool less the outliers: a component whose innovation
         (``(k,)``, one per measured row, in any units that ``S`` shares) is beyond ``outlier_gate``
         standard deviations of the innovation covariance ``S`` ``(k, k)`` is left out, unless it has
-        been left out ``outlier_gate_limit`` times in a row. Returns ``rows`` itself when no component
-        is left out (and always when the gate is off)."""
+        been left out ``outlier_gate_limit`` times in a row (consecutive refusals are counted per
+        ``sensor`` name). Returns ``rows`` itself when no component is left out (and always when the
+        gate is off)."""
         if not self.outlier_gate:
             return rows
         # a few components: Python floats cost less than numpy calls on arrays of three
         limits = [self.outlier_gate * math.sqrt(s) for s in S.diagonal().tolist()]
         outlier = [abs(v) > limit for v, limit in zip(innovation.tolist(), limits)]
-        streak = self._gate_streak
+        streak = self._gate_streaks.setdefault(sensor, np.zeros(rows.size, dtype=int))
         if not any(outlier):
             streak[rows] = 0
             return rows

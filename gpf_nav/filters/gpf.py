@@ -130,16 +130,16 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         self.regularization = float(regularization)
         self.kernel_bandwidth = (default_bandwidth(self.n_particles, model.state_dim)
                                  if kernel_bandwidth is None else float(kernel_bandwidth))
-        self._previous_y = np.full(model.measurement_dim, np.nan)
+        self._previous_y: dict[str, np.ndarray] = {}
         self._input = None
         self._proposal = None
         self._moment_target = None
         self.moment_matching = bool(moment_matching)
-        self._init_gate(outlier_gate, outlier_gate_limit, model.measurement_dim)  # (gating.py)
+        self._init_gate(outlier_gate, outlier_gate_limit)  # (gating.py)
 
     def initialize(self, mean, cov, t0=0.0):
         super().initialize(mean, cov, t0)
-        self._previous_y = np.full(self.model.measurement_dim, np.nan)
+        self._previous_y = {}
         # an update that recovered (re-initialised) before weighting left its proposal behind: the new
         # cloud is not the one it drew
         self._proposal = self._moment_target = None
@@ -171,8 +171,9 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
             self._set_costate(None, rows, dt)
             return super()._sample(x_pred, y, rows, dt)
         n, eps = self.model.state_dim, self.regularization
-        H = self.model.measurement_jacobian(mean[None], self.time)[0]  # (m, n), at the cloud's mean
-        r = self.model.residual(y, self.model.measure(centres.T, self.time))  # (N, m)
+        sensor = self._sensor
+        H = sensor.jacobian(mean[None], self.time)[0]  # (m, n), at the cloud's mean
+        r = sensor.residual(y, sensor.measure(centres.T, self.time))  # (N, m)
         whitened = self._whitened(H, r, rows, C)
         if whitened is None:
             self._set_costate(None, rows, dt)
@@ -181,7 +182,7 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         white_r = L_inv @ wr  # (k, N)
         # S^-1 W r / dt, outliers included (the division folded into the small factor)
         costate = (((L_inv.T / dt if dt > 0.0 else L_inv.T) @ white_r).T, rows, 1.0)
-        used = self._gate(wr @ self._weights, S, rows)
+        used = self._gate(wr @ self._weights, S, rows, sensor.name)
         if not used.any():  # every component refused: a prediction
             x, correction, _ = ParticleFilter._sample(self, x_pred, y, used, dt)
             self._set_costate(*costate)
@@ -285,8 +286,10 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         if self.metric == "cloud":  # a fallback of the cloud proposal: the prior transition this time
             self._set_costate(None, rows, dt)
             return None, 0.0
+        sensor = self._sensor
         if self.reference == "increment":
-            rows = rows & np.isfinite(self._previous_y)
+            previous_y = self._previous_y.get(sensor.name, np.full(sensor.dim, np.nan))
+            rows = rows & np.isfinite(previous_y)
         if dt == 0.0 or not rows.any() or (self.weighting == "corrected" and inverse_factor is None):
             self._set_costate(None, rows, dt)
             return None, 0.0
@@ -294,12 +297,12 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         if self.reference == "innovation":
             H, r = self._innovation(states, y, rows)
         else:
-            H = select_rows(self.model.measurement_jacobian(states, self.time), rows)
+            H = select_rows(sensor.jacobian(states, self.time), rows)
             eta = np.einsum("nkj,nj->nk", H, self.model.drift(states, self.time, self._input))
-            r = self.model.residual(y, self._previous_y)[rows] - eta * dt
+            r = sensor.residual(y, previous_y)[rows] - eta * dt
         metric_factor = self._noise_factors(dt)[0] if self.metric == "process_noise" else None
         shift, a = project(H, r, self._whitener(rows), self.regularization, metric_factor,
-                           self.model.measured_state_index, self.model.orthogonal_jacobian_rows)
+                           sensor.measured_state_index, sensor.orthogonal_jacobian_rows)
         self._set_costate(a, rows, dt)
         if self.weighting == "likelihood":
             return shift, 0.0
@@ -307,7 +310,7 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
 
     def _after_update(self, y, rows):
         if self.reference == "increment":  # the only reader of the previous measurement
-            self._previous_y = np.where(rows, y, np.nan)
+            self._previous_y[self._sensor.name] = np.where(rows, y, np.nan)
 
 
 def antithetic_normals(rng: np.random.Generator, rows: int, count: int) -> np.ndarray:

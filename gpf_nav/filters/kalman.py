@@ -49,11 +49,12 @@ def innovation_solve(S: np.ndarray, B: np.ndarray, r: np.ndarray) -> tuple[np.nd
 
 
 class ModelNoise:
-    """A model's ``Q(dt)`` and measured-rows block of ``R``, with square roots, computed once and cached.
+    """A model's ``Q(dt)`` and the measured-rows block of a sensor's ``R``, with square roots, computed
+    once and cached.
 
-    ``R`` is taken as fixed after construction: its block is recomputed only when the set of measured
-    rows changes. ``Q`` is recomputed when ``dt`` changes, and when ``t`` changes if the model's
-    ``process_noise`` takes ``t``.
+    The block of ``R`` is recomputed when the set of measured rows changes or ``R`` does (another
+    object with other values). ``Q`` is recomputed when ``dt`` changes, and when ``t`` changes if the
+    model's ``process_noise`` takes ``t``.
     """
 
     def __init__(self, model: StateSpaceModel):
@@ -62,7 +63,7 @@ class ModelNoise:
         self._key: tuple[float, float] | None = None
         self._q = self._q_sqrt = None
         self._mask_key: bytes | None = None
-        self._r = self._r_sqrt = None
+        self._r_full = self._r = self._r_sqrt = None
 
     def process(self, dt: float, t: float) -> np.ndarray:
         """``Q`` ``(n, n)`` over ``[t, t + dt]``."""
@@ -78,18 +79,19 @@ class ModelNoise:
             self._q_sqrt = psd_sqrt(q)
         return self._q_sqrt
 
-    def measurement(self, mask: np.ndarray) -> np.ndarray:
-        """``R[mask][:, mask]`` ``(k, k)`` for the measured rows ``mask`` ``(m,)`` bool."""
+    def measurement(self, mask: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """``R[mask][:, mask]`` ``(k, k)`` of a sensor's ``R`` ``(m, m)`` for the measured rows ``mask``
+        ``(m,)`` bool."""
         key = mask.tobytes()
-        if key != self._mask_key:
-            r = self._model.measurement_noise()
+        if key != self._mask_key or (r is not self._r_full and not np.array_equal(r, self._r_full)):
+            self._r_full = r
             self._r = r if mask.all() else r[np.ix_(mask, mask)]
             self._r_sqrt, self._mask_key = None, key
         return self._r
 
-    def measurement_sqrt(self, mask: np.ndarray) -> np.ndarray:
+    def measurement_sqrt(self, mask: np.ndarray, r: np.ndarray) -> np.ndarray:
         """``L`` ``(k, k)`` with ``L L^T = R[mask][:, mask]``."""
-        r = self.measurement(mask)
+        r = self.measurement(mask, r)
         if self._r_sqrt is None:
             self._r_sqrt = psd_sqrt(r)
         return self._r_sqrt
@@ -161,7 +163,7 @@ class ExtendedKF(InnovationGated, _GaussianFilter):
                  outlier_gate: float = 0.0, outlier_gate_limit: int = OUTLIER_GATE_LIMIT):
         super().__init__(model, seed)
         self._eye = np.eye(model.state_dim)
-        self._init_gate(outlier_gate, outlier_gate_limit, model.measurement_dim)
+        self._init_gate(outlier_gate, outlier_gate_limit)
 
     def predict(self, dt: float, u: np.ndarray | None = None) -> None:
         """``x <- f(x)``, ``P <- F P F^T + Q(dt)``; ``dt == 0`` leaves the estimate unchanged."""
@@ -178,29 +180,32 @@ class ExtendedKF(InnovationGated, _GaussianFilter):
         self.time += dt
         self._guard(False, self._x, self._P)
 
-    def update(self, y: np.ndarray) -> None:
-        """Condition on ``y`` ``(m,)``; NaN rows are not measured, an all-NaN ``y`` is a no-op."""
-        measured = self._measured_rows(y)
+    def update(self, y: np.ndarray, sensor=None) -> None:
+        """Condition on ``y`` ``(m,)`` of ``sensor`` (None: the model's); NaN rows are not measured, an
+        all-NaN ``y`` is a no-op."""
+        sensor = self._sensor_for(sensor)
+        measured = self._measured_rows(y, sensor)
         if measured is None:
             return
         y, mask, k = measured
         x = self._x[None]
-        hx, H = self.model.measure_and_jacobian(x, self.time)
-        r, H = self.model.residual(y, hx[0]), H[0]
+        hx, H = sensor.measure_and_jacobian(x, self.time)
+        r, H = sensor.residual(y, hx[0]), H[0]
         if k < mask.shape[0]:
             r, H = r[mask], H[mask]
-        R = self._noise.measurement(mask)
+        noise = sensor.noise(self.time)
+        R = self._noise.measurement(mask, noise)
         P = self._P
         HP = H.dot(P)
         S = HP.dot(H.T)
         S += R
-        used = self._gate(r, S, mask)
+        used = self._gate(r, S, mask, sensor.name)
         if used is not mask:  # outliers left out
             if not used.any():
                 self.last_log_likelihood = 0.0
                 return
             keep = used[mask]
-            r, H, HP, S, R = r[keep], H[keep], HP[keep], S[np.ix_(keep, keep)], self._noise.measurement(used)
+            r, H, HP, S, R = r[keep], H[keep], HP[keep], S[np.ix_(keep, keep)], self._noise.measurement(used, noise)
         try:
             Kt, _, self.last_log_likelihood = innovation_solve(S, HP, r)
         except np.linalg.LinAlgError:
@@ -290,22 +295,23 @@ class UnscentedKF(_GaussianFilter):
         self.time += dt
         self._guard(False, self._x, self._P)
 
-    def update(self, y: np.ndarray) -> None:
-        """Condition on ``y`` ``(m,)``; NaN rows are not measured, an all-NaN ``y`` is a no-op."""
-        measured = self._measured_rows(y)
+    def update(self, y: np.ndarray, sensor=None) -> None:
+        """Condition on ``y`` ``(m,)`` of ``sensor`` (None: the model's); NaN rows are not measured, an
+        all-NaN ``y`` is a no-op."""
+        sensor = self._sensor_for(sensor)
+        measured = self._measured_rows(y, sensor)
         if measured is None:
             return
         y, mask, k = measured
-        model = self.model
         E = self._sigma_offsets()
-        Z = model.measure(self._x + E, self.time)
-        dZ = model.residual(Z, Z[0])
-        delta = model.measurement_mean(dZ, self._wm)
+        Z = sensor.measure(self._x + E, self.time)
+        dZ = sensor.residual(Z, Z[0])
+        delta = sensor.measurement_mean(dZ, self._wm)
         mu = self._w * dZ.sum(axis=0)
-        r = model.residual(y, Z[0] + delta)
+        r = sensor.residual(y, Z[0] + delta)
         if k < mask.shape[0]:
             dZ, delta, mu, r = dZ[:, mask], delta[mask], mu[mask], r[mask]
-        S = self._spread(dZ, delta, mu) + self._noise.measurement(mask)
+        S = self._spread(dZ, delta, mu) + self._noise.measurement(mask, sensor.noise(self.time))
         # Cross-covariance (transposed, (k, n)); the delta term vanishes because sum_i wc_i E_i = 0.
         C = self._w * (dZ.T @ E)
         try:

@@ -96,10 +96,11 @@ class MultipleModelGPF:
         for member in self.members:
             member.predict(dt, u)
 
-    def update(self, y: np.ndarray) -> None:
+    def update(self, y: np.ndarray, sensor=None) -> None:
+        """Both members update with ``y`` of ``sensor`` (None: the model's); then the probabilities."""
         before = [(m.gated, m.recoveries) for m in self.members]
         for member in self.members:
-            member.update(y)
+            member.update(y, sensor)
         comparable = all((m.gated, m.recoveries) == b for m, b in zip(self.members, before))
         mu = self._predicted_probabilities
         if comparable:

@@ -28,6 +28,7 @@ from gpf_nav.filters.kernel import match_moments
 from gpf_nav.filters.projection import project
 from gpf_nav.linalg import cholesky_or_none, psd_sqrt
 from gpf_nav.models.base import StateSpaceModel
+from gpf_nav.sensors.base import Sensor
 
 
 STATE_LIMIT = 1e150
@@ -72,6 +73,7 @@ class ParticleFilter(Filter):
         self._weights = np.full(self.n_particles, 1.0 / self.n_particles)
         self._pending_dt = 0.0
         self._pending_t = 0.0
+        self._sensor = self._own_sensor
         self._R = np.asarray(model.measurement_noise(), dtype=float)
         self._whiteners: dict[bytes, tuple[np.ndarray, float]] = {}
         self._time_varying_noise = model.time_varying_noise
@@ -179,9 +181,10 @@ class ParticleFilter(Filter):
         self.time += dt
         self._discard_non_finite()
 
-    def update(self, y):
+    def update(self, y, sensor=None):
         self._require_initialized()
-        y, rows = self._check_measurement(y)
+        sensor = self._use(sensor)
+        y, rows = self._check_measurement(y, sensor)
         x, log_correction, rows = self._sample(self._x, y, rows, self._pending_dt)
         self._x = x
         self._pending_dt = 0.0
@@ -198,6 +201,16 @@ class ParticleFilter(Filter):
         self._updates += 1
         if self._updates % _REMEMBER_EVERY == 0:
             self._remember(*self._estimate())
+
+    def _use(self, sensor: Sensor | None) -> Sensor:
+        """Make ``sensor`` (None: the model's own) the one this update measures with, and read its noise
+        ``R``: the one place an update reads it (the whitening factors are cached until ``R`` changes)."""
+        sensor = self._sensor = self._sensor_for(sensor)
+        R = sensor.noise(self.time)
+        if R is not self._R and not np.array_equal(R, self._R):
+            self._whiteners = {}
+        self._R = R
+        return sensor
 
     def _estimate(self) -> tuple[np.ndarray, np.ndarray]:
         """``(mean, covariance)`` of the estimate, as :meth:`_remember` keeps it (one call where a
@@ -294,9 +307,10 @@ class ParticleFilter(Filter):
 
     def _set_costate(self, a: np.ndarray | None, rows: np.ndarray, dt: float) -> None:
         """Keep the co-state ``a / dt`` of the measured ``rows`` (``a`` ``(N, k)``), zero for the other
-        components; ``a = None`` clears it (no new array when it is already clear)."""
+        components; ``a = None`` clears it (no new array when it is already clear). The co-state is kept
+        for the model's own measurement only (the integrity monitor tests it); another sensor clears it."""
         m = self.model.measurement_dim
-        if a is None:
+        if a is None or self._sensor is not self._own_sensor:
             if self._costate_rows.any():
                 self._costate = np.zeros((self.n_particles, m))
                 self._costate_rows = np.zeros(m, bool)
@@ -314,8 +328,8 @@ class ParticleFilter(Filter):
     def _innovation(self, states: np.ndarray, y: np.ndarray, rows: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray]:
         """Jacobian ``(N, k, n)`` and innovation ``y - h(x)`` ``(N, k)`` of the measured rows."""
-        h, H = self.model.measure_and_jacobian(states, self.time)
-        return select_rows(H, rows), select_columns(self.model.residual(y, h), rows)
+        h, H = self._sensor.measure_and_jacobian(states, self.time)
+        return select_rows(H, rows), select_columns(self._sensor.residual(y, h), rows)
 
     # --- weighting -----------------------------------------------------------------------------------
     def _whitener(self, rows: np.ndarray) -> np.ndarray:
@@ -337,7 +351,7 @@ class ParticleFilter(Filter):
 
     def _log_likelihood(self, x: np.ndarray, y: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """Gaussian ``log p(y_rows | x)`` ``(N,)`` for particles ``x`` ``(n, N)``."""
-        e = self.model.residual(y, self.model.measure(x.T, self.time)).T  # (m, N)
+        e = self._sensor.residual(y, self._sensor.measure(x.T, self.time)).T  # (m, N)
         w, constant = self._whitening(rows)
         e = e if rows.all() else e[rows]
         ew = e * w[:, None] if w.ndim == 1 else w @ e  # (k, N)
@@ -399,8 +413,8 @@ class BootstrapPF(ParticleFilter):
         if self.compute_costate and dt > 0.0 and rows.any():
             H, r = self._innovation(x_pred.T, y, rows)
             a = project(H, r, self._whitener(rows), self.regularization,
-                        columns=self.model.measured_state_index,
-                        orthogonal_rows=self.model.orthogonal_jacobian_rows)[1]
+                        columns=self._sensor.measured_state_index,
+                        orthogonal_rows=self._sensor.orthogonal_jacobian_rows)[1]
         self._set_costate(a, rows, dt)
         return None, 0.0
 

@@ -157,20 +157,32 @@ class StateSpaceModel(ABC):
 
         Shapes broadcast: ``(m,)`` against ``(N, m)`` gives ``(N, m)``.
         """
-        r = np.asarray(y, dtype=float) - y_pred
-        angles = _angle_columns(np.asarray(self.angular, dtype=bool).tobytes())
-        if angles is not None:
-            # wrap_angle, skipping its subtraction when no component needs it (the usual case)
-            turns = np.ceil((r[..., angles] - np.pi) * (1.0 / _TWO_PI))
-            if np.count_nonzero(turns):
-                r[..., angles] -= _TWO_PI * turns
-        return r
+        return wrapped_residual(y, y_pred, self.angular)
 
     def measurement_mean(self, y: np.ndarray, weights: np.ndarray) -> np.ndarray:
         """Weighted mean of measurements ``(K, m)`` with weights ``(K,)``; angles by circular mean."""
-        mean = np.einsum("k,km->m", weights, y)  # not BLAS: K may be an ensemble size
-        if np.any(self.angular):
-            a = y[:, self.angular]
-            mean[self.angular] = np.arctan2(np.einsum("k,km->m", weights, np.sin(a)),
-                                            np.einsum("k,km->m", weights, np.cos(a)))
-        return mean
+        return measurement_mean(y, weights, self.angular)
+
+
+def wrapped_residual(y: np.ndarray, y_pred: np.ndarray, angular: np.ndarray) -> np.ndarray:
+    """``y - y_pred`` (shapes broadcast) with the components of the mask ``angular`` ``(m,)`` wrapped to
+    (-pi, pi]: the residual of models and sensors (:mod:`gpf_nav.sensors`)."""
+    r = np.asarray(y, dtype=float) - y_pred
+    angles = _angle_columns(np.asarray(angular, dtype=bool).tobytes())
+    if angles is not None:
+        # wrap_angle, skipping its subtraction when no component needs it (the usual case)
+        turns = np.ceil((r[..., angles] - np.pi) * (1.0 / _TWO_PI))
+        if np.count_nonzero(turns):
+            r[..., angles] -= _TWO_PI * turns
+    return r
+
+
+def measurement_mean(y: np.ndarray, weights: np.ndarray, angular: np.ndarray) -> np.ndarray:
+    """Weighted mean of measurements ``(K, m)`` with weights ``(K,)``; the components of the mask
+    ``angular`` ``(m,)`` by circular mean."""
+    mean = np.einsum("k,km->m", weights, y)  # not BLAS: K may be an ensemble size
+    if np.any(angular):
+        a = y[:, angular]
+        mean[angular] = np.arctan2(np.einsum("k,km->m", weights, np.sin(a)),
+                                   np.einsum("k,km->m", weights, np.cos(a)))
+    return mean
