@@ -3,6 +3,7 @@
     gpf-nav bench        per-step cost of every filter (``gpf_nav.experiments.bench``)
     gpf-nav montecarlo   the paper's Monte Carlo table (``gpf_nav.experiments.montecarlo``)
     gpf-nav sweep        mismatch / noise sweeps (``gpf_nav.experiments.sweep``)
+    gpf-nav stress       large prior, range only, outliers, bias, prior size (``gpf_nav.experiments.stress``)
     gpf-nav integrity    co-state monitor false alarms and detection delays (``gpf_nav.experiments.integrity``)
     gpf-nav demo         simulator + estimator over ROS 2, with a summary (``gpf_nav.tools.demo``)
     gpf-nav record       the simulator's scenario written as a rosbag2 bag (``gpf_nav.bags.record``)
@@ -26,6 +27,7 @@ COMMANDS = {
     "bench": "gpf_nav.experiments.bench",
     "montecarlo": "gpf_nav.experiments.montecarlo",
     "sweep": "gpf_nav.experiments.sweep",
+    "stress": "gpf_nav.experiments.stress",
     "demo": "gpf_nav.tools.demo",
     "integrity": "gpf_nav.experiments.integrity",
     "record": "gpf_nav.bags.record",

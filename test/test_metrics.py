@@ -44,6 +44,15 @@ def test_nees_nan_for_singular_or_nonfinite_covariance_only_at_that_step():
         metrics.nees(errors, np.eye(2))
 
 
+def test_not_positive_definite_flags_singular_indefinite_and_nonfinite_covariances():
+    good = np.array([[4.0, 1.0], [1.0, 2.0]])
+    covariances = np.stack([good, np.diag([1.0, 0.0]), np.diag([1.0, -1e-12]), np.full((2, 2), np.nan),
+                            np.array([[1.0, 2.0], [2.0, 1.0]]), good])
+    assert metrics.not_positive_definite(covariances).tolist() == [False, True, True, True, True, False]
+    assert metrics.not_positive_definite(np.stack([good] * 3)).tolist() == [False] * 3
+    assert metrics.not_positive_definite(np.zeros((0, 2, 2))).shape == (0,)
+
+
 def test_chi2_band_matches_scipy_and_the_textbook_value():
     lo, hi = metrics.chi2_band(dof=6, runs=100)
     assert lo == pytest.approx(stats.chi2.ppf(0.025, 600) / 100)

@@ -61,6 +61,25 @@ def nees(errors: np.ndarray, covariances: np.ndarray) -> np.ndarray:
     return out
 
 
+def not_positive_definite(covariances: np.ndarray) -> np.ndarray:
+    """Which covariances ``(K, n, n)`` a consumer could not factor: ``(K,)`` bool, True where the matrix
+    as given is non-finite or its Cholesky factorisation (of the lower triangle, numpy's) fails, i.e. it
+    is singular or indefinite to working precision."""
+    covariances = np.asarray(covariances, dtype=float)
+    bad = ~np.all(np.isfinite(covariances), axis=(1, 2))
+    try:  # one batched factorisation when every finite covariance is positive definite
+        np.linalg.cholesky(covariances[~bad])
+        return bad
+    except np.linalg.LinAlgError:
+        pass
+    for k in np.flatnonzero(~bad):
+        try:
+            np.linalg.cholesky(covariances[k])
+        except np.linalg.LinAlgError:
+            bad[k] = True
+    return bad
+
+
 def nees_step(error: np.ndarray, covariance: np.ndarray) -> float:
     """NEES of one step, ``e^T P^-1 e`` via a Cholesky factor; NaN if ``P`` is not positive definite."""
     if not (np.all(np.isfinite(error)) and np.all(np.isfinite(covariance))):

@@ -234,6 +234,54 @@ def sweep(values: np.ndarray, tables: dict, param_label: str, runs: int, path: P
     return _save(fig, path)
 
 
+def stress(conditions: dict, prior: list, runs: int, path: Path) -> Path:
+    """The stress campaign: mean position RMSE (bars; dots: median) and mean NEES per condition and
+    filter, and the mean position RMSE against the prior size.
+
+    ``conditions[name] = (label, {filter: row})`` and ``prior = [(scale, {filter: row}), ...]`` with the
+    rows of :func:`gpf_nav.experiments.stress.summarise` (metres).
+    """
+    plt = _pyplot()
+    names = list(conditions)
+    filters = list(next(iter(conditions.values()))[1])
+    fig, axes = plt.subplots(1, 3, figsize=(21.0, 5.2), layout="constrained",
+                             gridspec_kw={"width_ratios": [2.2, 2.2, 1.2]})
+    width = 0.8 / len(filters)
+    x = np.arange(len(names))
+
+    def value(row, key):
+        return np.nan if row[key] is None else row[key]
+
+    for i, name in enumerate(filters):
+        offset = x - 0.4 + (i + 0.5) * width
+        rows = [conditions[c][1][name] for c in names]
+        look = {"color": colour(name), "hatch": None if style(name) == "-" else "//", "edgecolor": "white"}
+        axes[0].bar(offset, [value(r, "position_rmse_mean") for r in rows], width, label=name, **look)
+        axes[0].plot(offset, [value(r, "position_rmse_median") for r in rows], "k.", ms=4)
+        axes[1].bar(offset, [value(r, "nees_mean") for r in rows], width, **look)
+        if prior:
+            scales = [p[0] for p in prior]
+            axes[2].plot(scales, [value(p[1][name], "position_rmse_mean") for p in prior], "o" + style(name),
+                         color=colour(name), lw=1.3, ms=4)
+    for ax, ylabel in ((axes[0], "position RMSE (m): bar mean, dot median"), (axes[1], "mean NEES (6 states)")):
+        ax.set_xticks(x, [conditions[c][0] for c in names], rotation=25, ha="right", fontsize=8)
+        ax.set_yscale("log")
+        ax.set_ylabel(ylabel)
+        ax.grid(True, which="both", axis="y", alpha=0.3)
+    axes[1].axhspan(2.0, 15.0, color="0.85", zorder=0, label="2-15")
+    axes[1].axhline(6.0, color="k", ls=":", lw=0.8)
+    axes[2].set_xscale("log")
+    axes[2].set_yscale("log")
+    axes[2].set_xlabel("prior size s: position sigma s km, velocity sigma s m/s")
+    axes[2].set_ylabel("mean position RMSE (m)")
+    axes[2].set_title("prior-size sweep", fontsize=10)
+    axes[2].grid(True, which="both", alpha=0.3)
+    _shared_legend(fig, axes[0], columns=len(filters))
+    fig.suptitle(f"Stress campaign: {runs} runs per condition, the same runs for every filter "
+                 f"(NEES: grey band 2-15, dotted line 6)")
+    return _save(fig, path)
+
+
 def estimate_errors(times: np.ndarray, errors: np.ndarray, sigmas: np.ndarray, title: str, path: Path) -> Path:
     """Per-axis error of one run against truth with the filter's 3-sigma bounds.
 

@@ -191,7 +191,10 @@ def run_filter(flt, scenario, divergence_bound: float = DEFAULT_DIVERGENCE_BOUND
     Returns a dict with per-run scalars (``position_rmse`` m, ``velocity_rmse`` m/s, ``ess`` time average
     of ESS/N, ``costate_norm`` time average, ``nees`` time average over the steps with a positive
     definite covariance, ``nees_defined`` fraction of such steps, ``resample_rate``, ``max_position_error``
-    m, ``diverged``, ``nonfinite``, ``error`` message or None, ``seconds``) and the per-step ``series``
+    and ``final_position_error`` m, ``first_ess`` ESS/N after the first update, ``covariance_failures``
+    the number of steps whose published covariance was singular or indefinite
+    (:func:`~gpf_nav.experiments.metrics.not_positive_definite`), ``diverged``, ``nonfinite``, ``error``
+    message or None, ``seconds``) and the per-step ``series``
     (``position_error`` m, ``velocity_error`` m/s, ``nees``, ``ess``, ``costate_norm``), NaN past a stop.
     A filter that raises or produces a non-finite estimate is stopped there and flagged ``nonfinite``.
     """
@@ -241,6 +244,9 @@ def run_filter(flt, scenario, divergence_bound: float = DEFAULT_DIVERGENCE_BOUND
         "nees_defined": float(np.mean(np.isfinite(nees))) if finished else math.nan,
         "resample_rate": float(resampled.mean()) if is_particle and finished else math.nan,
         "max_position_error": float(np.nanmax(pos_err)) if np.any(np.isfinite(pos_err)) else math.nan,
+        "final_position_error": float(pos_err[-1]),
+        "first_ess": float(ess[0]),
+        "covariance_failures": int(metrics.not_positive_definite(covariances[np.isfinite(pos_err)]).sum()),
         "nonfinite": nonfinite,
         "error": error,
         "seconds": seconds,
