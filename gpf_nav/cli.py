@@ -5,6 +5,7 @@
     gpf-nav sweep        mismatch / noise sweeps (``gpf_nav.experiments.sweep``)
     gpf-nav stress       large prior, range only, outliers, bias, prior size (``gpf_nav.experiments.stress``)
     gpf-nav integrity    co-state monitor false alarms and detection delays (``gpf_nav.experiments.integrity``)
+    gpf-nav sensors      rae only against the full sensor suite (``gpf_nav.experiments.sensor_campaign``)
     gpf-nav demo         simulator + estimator over ROS 2, with a summary (``gpf_nav.tools.demo``)
     gpf-nav record       the simulator's scenario written as a rosbag2 bag (``gpf_nav.bags.record``)
     gpf-nav replay       the estimator run offline over a rosbag2 bag, with a summary (``gpf_nav.bags.replay``)
@@ -30,6 +31,7 @@ COMMANDS = {
     "stress": "gpf_nav.experiments.stress",
     "demo": "gpf_nav.tools.demo",
     "integrity": "gpf_nav.experiments.integrity",
+    "sensors": "gpf_nav.experiments.sensor_campaign",
     "record": "gpf_nav.bags.record",
     "replay": "gpf_nav.bags.replay",
 }
