@@ -252,3 +252,27 @@ def test_a_constant_range_bias_of_two_sigma_estimated_on_the_descent():
         assert estimated["position_rmse"] <= 1.2 * unbiased["position_rmse"]
         bias, sigma = flt.sensor_bias("rae")
         assert abs(bias[0] - 60.0) < 3.0 * sigma[0]
+
+
+def test_bias_declarations_are_checked():
+    from gpf_nav.sensors import Bias, SensorBiasModel
+
+    model = _cv_model()
+    with pytest.raises(ValueError, match="non-negative"):
+        random_constant_bias([-1.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="correlation times"):
+        gauss_markov_bias(1.0, 0.0)
+    with pytest.raises(ValueError, match="two biased sensors"):
+        SensorBiasModel(model, [PositionSensor(1.0, bias=random_constant_bias(1.0 * np.ones(3))),
+                                PositionSensor(2.0, bias=random_constant_bias(1.0 * np.ones(3)))])
+    with pytest.raises(ValueError, match="bias has 1 components, the sensor 3"):
+        SensorBiasModel(model, [PositionSensor(1.0, bias=random_constant_bias(1.0))])
+    augmented = SensorBiasModel(model, [PositionSensor(1.0, bias=Bias((0.0, 2.0, 0.0), (50.0,))),
+                                        VelocitySensor(0.1)])
+    assert augmented.state_dim == 7 and list(augmented.blocks) == ["position"]
+    # the Gauss-Markov state's transition and noise over 10 s keep its stationary variance 4
+    decay = augmented.transition_jacobian(np.zeros((1, 7)), 10.0)[0, 6, 6]
+    assert decay == pytest.approx(math.exp(-10.0 / 50.0))
+    assert decay ** 2 * 4.0 + augmented.process_noise(10.0)[6, 6] == pytest.approx(4.0)
+    with pytest.raises(ValueError, match="has 1 components, its bias states 3"):
+        augmented.lift(AltitudeSensor(1.0, name="position"))
