@@ -136,7 +136,8 @@ def generate_suite(scenario: Scenario, config: SuiteConfig, seed: int) -> SuiteD
     radius = np.linalg.norm(truth[:, :3], axis=1)
     altitude = radius - MOON_RADIUS
 
-    alt = (radius - config.reference_radius)[:, None] + config.altimeter_noise_std * alt_rng.standard_normal((steps, 1))
+    alt = ((radius - config.reference_radius)[:, None]
+           + config.altimeter_noise_std * alt_rng.standard_normal((steps, 1)))
     alt[~(_every(config.altimeter_period, dt, steps) & (altitude < config.altimeter_max_altitude))] = np.nan
 
     fix = truth[:, :3] + config.trn_noise_std * trn_rng.standard_normal((steps, 3))

@@ -276,3 +276,20 @@ def test_bias_declarations_are_checked():
     assert decay ** 2 * 4.0 + augmented.process_noise(10.0)[6, 6] == pytest.approx(4.0)
     with pytest.raises(ValueError, match="has 1 components, its bias states 3"):
         augmented.lift(AltitudeSensor(1.0, name="position"))
+
+
+def test_innovation_distance_of_a_fix():
+    from gpf_nav.sensors import innovation_distance
+
+    mean, cov = _prior()
+    R = np.diag([1.0, 2.0, 3.0])
+    y = mean[:3] + np.array([1.0, -2.0, 0.5])
+    r = y - mean[:3]
+    d2, k = innovation_distance(PositionSensor(np.sqrt(np.diag(R))), y, mean, cov)
+    assert k == 3 and d2 == pytest.approx(r @ np.linalg.solve(cov[:3, :3] + R, r))
+    y[1] = np.nan
+    d2, k = innovation_distance(PositionSensor(np.sqrt(np.diag(R))), y, mean, cov)
+    keep = [0, 2]
+    S = (cov[:3, :3] + R)[np.ix_(keep, keep)]
+    assert k == 2 and d2 == pytest.approx(r[keep] @ np.linalg.solve(S, r[keep]))
+    assert innovation_distance(PositionSensor(1.0), np.full(3, np.nan), mean, cov) == (0.0, 0)

@@ -5,7 +5,9 @@ elevation only; ``full`` also fuses the suite of :mod:`gpf_nav.sensor_suite` (al
 fixes delivered late, velocimeter). A late TRN fix is fused at its stamp: the run keeps the filter as it
 was at the fix's capture (a copy, random generator included) and, when the fix arrives, fuses it there
 and re-applies what came after, as an estimator replaying its history does; the estimate scored at each
-step is the one available then (before a fix arrives, without it). The report gives the position and
+step is the one available then (before a fix arrives, without it). A fix far from the estimate at its
+stamp (chi-square quantile ``--fix-gate``) is refused whole, as a navigation system checks a TRN fix
+before it uses it; the filters' own gates act per component. The report gives the position and
 velocity errors against time (and the mean altitude), their RMSE over the whole run and over its second
 half, and the mean NEES of the six states.
 
@@ -24,28 +26,39 @@ from pathlib import Path
 
 import numpy as np
 
+from scipy.stats import chi2
+
 from gpf_nav.arguments import CommandParser, positive_float, positive_int
 from gpf_nav.experiments import metrics
 from gpf_nav.experiments.montecarlo import git_commit, parse_filters, write_json
 from gpf_nav.experiments.parallel import map_tasks
 from gpf_nav.experiments.runner import ALIASES, DEFAULT_PARTICLES, _make_filter, run_seeds
+from gpf_nav.filters.gating import OUTLIER_GATE_LIMIT
 from gpf_nav.models.lunar import MOON_RADIUS
 from gpf_nav.scenario import ScenarioConfig, filter_model, generate
 from gpf_nav.sensor_suite import SuiteConfig, SuiteData, generate_suite, suite_sensors
+from gpf_nav.sensors import innovation_distance
 
 SCHEMA = "gpf_nav.sensor_campaign/1"
 MODES = ("rae", "full")
 DEFAULT_FILTERS = (ALIASES["gpf"], ALIASES["ekf-comp-gated"])
+FIX_GATE = 0.999
+"""Default chi-square quantile of the campaign's whole-fix gate (:func:`fuse`)."""
 _SAME_TIME = 1e-9  # s: a fix arriving within this of a step arrives at that step
 
 
-def fuse(flt, scenario, suite: SuiteData | None) -> dict:
+def fuse(flt, scenario, suite: SuiteData | None, fix_gate: float = 0.0) -> dict:
     """Run ``flt`` from the scenario's prior over its steps, with the suite's data when ``suite`` is given.
 
     At each step ``k``: ``predict``, the range/azimuth/elevation, then the altitude and the velocity when
-    measured; TRN fixes are fused at their stamp when they arrive (module docstring). Returns the
-    per-step ``position_error`` (m), ``velocity_error`` (m/s), ``nees`` (six states) and ``fixes`` (TRN
-    fixes fused), ``seconds``, ``error`` (a message if the filter raised or went non-finite, else None).
+    measured; TRN fixes are fused at their stamp when they arrive (module docstring). ``fix_gate`` in
+    [0, 1): a fix whose squared Mahalanobis distance from the estimate at its stamp
+    (:func:`~gpf_nav.sensors.base.innovation_distance`) is beyond this quantile of the chi-square law
+    with three degrees of freedom is refused, unless the previous ``OUTLIER_GATE_LIMIT`` fixes were (then
+    the estimate, not the fix, is taken to be off); 0 fuses every fix. Returns the per-step
+    ``position_error`` (m), ``velocity_error`` (m/s), ``nees`` (six states), ``fixes`` (TRN fixes fused),
+    ``refused`` (fixes refused by ``fix_gate``), ``gated`` (components the filter's own gate refused),
+    ``seconds``, ``error`` (a message if the filter raised or went non-finite, else None).
     """
     steps, dt = scenario.times.shape[0], scenario.config.dt
     sensors = suite_sensors(suite.config) if suite is not None else {}
@@ -55,6 +68,8 @@ def fuse(flt, scenario, suite: SuiteData | None) -> dict:
     covariances = np.full((steps, 6, 6), np.nan)
     pending: dict[int, object] = {}  # capture step -> the filter as it was then (fix not yet delivered)
     fused = 0
+    refused: dict[int, bool] = {}  # capture step -> refused by fix_gate (a replay decides again)
+    limit = chi2.ppf(fix_gate, 3) if fix_gate > 0.0 else math.inf
     error = None
 
     def step(f, k: int) -> None:
@@ -71,8 +86,13 @@ def fuse(flt, scenario, suite: SuiteData | None) -> dict:
         if k not in capture_set:
             return 0
         if suite.position_arrival[k] <= now + _SAME_TIME:
-            f.update(suite.position[k], sensors["position"])
             pending.pop(k, None)
+            earlier = [refused[c] for c in sorted(refused) if c < k][-OUTLIER_GATE_LIMIT:]
+            d2 = innovation_distance(sensors["position"], suite.position[k], f.mean, f.covariance)[0]
+            refused[k] = d2 > limit and not (len(earlier) == OUTLIER_GATE_LIMIT and all(earlier))
+            if refused[k]:
+                return 0
+            f.update(suite.position[k], sensors["position"])
             return 1
         pending[k] = copy.deepcopy(f)
         return 0
@@ -103,13 +123,14 @@ def fuse(flt, scenario, suite: SuiteData | None) -> dict:
         error = f"{type(exc).__name__}: {exc}"
     return {"position_error": np.linalg.norm(errors[:, :3], axis=1),
             "velocity_error": np.linalg.norm(errors[:, 3:], axis=1),
-            "nees": metrics.nees(errors, covariances), "fixes": fused,
+            "nees": metrics.nees(errors, covariances), "fixes": fused, "refused": sum(refused.values()),
             "gated": int(getattr(flt, "gated", 0)), "seconds": time.perf_counter() - start, "error": error}
 
 
 @dataclass(frozen=True)
 class SuiteTask:
-    """One run: scenario ``config`` and ``suite`` settings, run ``run`` of a campaign seeded ``seed``."""
+    """One run: scenario ``config`` and ``suite`` settings, run ``run`` of a campaign seeded ``seed``;
+    ``fix_gate`` as :func:`fuse`'s."""
 
     index: int
     run: int
@@ -118,6 +139,7 @@ class SuiteTask:
     suite: SuiteConfig
     filters: tuple[str, ...] = DEFAULT_FILTERS
     n_particles: int = DEFAULT_PARTICLES
+    fix_gate: float = FIX_GATE
 
 
 def run_task(task: SuiteTask) -> dict:
@@ -134,7 +156,7 @@ def run_task(task: SuiteTask) -> dict:
     for name in task.filters:
         out["filters"][name] = {
             mode: fuse(_make_filter(name, model, task.n_particles, filter_seed), scenario,
-                       suite if mode == "full" else None)
+                       suite if mode == "full" else None, task.fix_gate)
             for mode in MODES}
     return out
 
@@ -158,11 +180,13 @@ def summarise(results: list[dict], filters: tuple[str, ...]) -> dict:
             good = [s for s in runs if s["error"] is None]
             entry[mode] = {
                 "position_rmse_m": metrics.mean_std([_rmse(s["position_error"]) for s in good]),
-                "position_rmse_second_half_m": metrics.mean_std([_rmse(s["position_error"][second]) for s in good]),
+                "position_rmse_second_half_m": metrics.mean_std([_rmse(s["position_error"][second])
+                                                                 for s in good]),
                 "velocity_rmse_second_half_mps": metrics.mean_std([_rmse(s["velocity_error"][second])
                                                                    for s in good]),
                 "nees": metrics.mean_std([metrics.time_average(s["nees"]) for s in good]),
                 "fixes": metrics.mean_std([s["fixes"] for s in good]),
+                "refused": metrics.mean_std([s["refused"] for s in good]),
                 "gated": metrics.mean_std([s["gated"] for s in good]),
                 "failed_runs": len(runs) - len(good),
                 "seconds": float(np.mean([s["seconds"] for s in runs])),
@@ -180,12 +204,13 @@ def summarise(results: list[dict], filters: tuple[str, ...]) -> dict:
 
 def campaign(config: ScenarioConfig, suite: SuiteConfig, runs: int = 20, seed: int = 0,
              filters: tuple[str, ...] = DEFAULT_FILTERS, n_particles: int = DEFAULT_PARTICLES,
-             workers: int | None = None, progress: bool = True) -> tuple[dict, dict]:
+             workers: int | None = None, progress: bool = True, fix_gate: float = FIX_GATE) -> tuple[dict, dict]:
     """Run the campaign; returns ``(report, per-step data for the figure)``."""
-    tasks = [SuiteTask(i, i, seed, config, suite, tuple(filters), n_particles) for i in range(runs)]
+    tasks = [SuiteTask(i, i, seed, config, suite, tuple(filters), n_particles, fix_gate) for i in range(runs)]
     results = map_tasks(run_task, tasks, workers=workers, progress=progress, description="sensor-suite runs")
     report = {"schema": SCHEMA,
               "settings": {"runs": runs, "seed": seed, "n_particles": n_particles, "filters": list(filters),
+                           "fix_gate": fix_gate,
                            "scenario": config.to_dict(), "suite": dataclasses.asdict(suite),
                            "second_half_from_s": float(results[0]["times"][results[0]["times"].shape[0] // 2]),
                            "outlier_fixes_mean": float(np.mean([r["outliers"] for r in results]))},
@@ -201,20 +226,22 @@ def campaign(config: ScenarioConfig, suite: SuiteConfig, runs: int = 20, seed: i
 def markdown(report: dict) -> str:
     """The campaign's table (Markdown)."""
     s = report["settings"]
-    lines = [f"{s['runs']} runs, seed {s['seed']}, {s['n_particles']} particles; second half from "
+    gate = f"TRN fix gate at the {s['fix_gate']} chi-square quantile" if s["fix_gate"] else "no TRN fix gate"
+    lines = [f"{s['runs']} runs, seed {s['seed']}, {s['n_particles']} particles, {gate}; second half from "
              f"t = {s['second_half_from_s']:.0f} s; {s['outlier_fixes_mean']:.1f} outlier TRN fixes per run "
              f"on average.", "",
              "| filter | sensors | position RMSE (m) | 2nd half position RMSE (m) | 2nd half velocity RMSE "
-             "(m/s) | mean NEES (6 states) | TRN fixes fused | components gated |",
+             "(m/s) | mean NEES (6 states) | TRN fixes fused / refused | components gated |",
              "|---|---|---|---|---|---|---|---|"]
     for name, entry in report["filters"].items():
         for mode in MODES:
             e = entry[mode]
             pm = lambda d, f="{:.0f}": f"{f.format(d['mean'])} ± {f.format(d['std'])}"  # noqa: E731
-            lines.append(f"| {name} | {'rae only' if mode == 'rae' else 'full suite'} | {pm(e['position_rmse_m'])} "
+            sensors = "rae only" if mode == "rae" else "full suite"
+            lines.append(f"| {name} | {sensors} | {pm(e['position_rmse_m'])} "
                          f"| {pm(e['position_rmse_second_half_m'])} "
                          f"| {pm(e['velocity_rmse_second_half_mps'], '{:.3f}')} | {pm(e['nees'], '{:.1f}')} "
-                         f"| {e['fixes']['mean']:.0f} | {e['gated']['mean']:.1f} |")
+                         f"| {e['fixes']['mean']:.0f} / {e['refused']['mean']:.1f} | {e['gated']['mean']:.1f} |")
     lines.append("")
     for name, entry in report["filters"].items():
         ratio = entry["second_half_position_ratio"]
@@ -275,6 +302,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="comma-separated filters, short names as montecarlo's (default gpf,ekf-comp-gated)")
     parser.add_argument("--suite", action="append", default=[], metavar="KEY=VALUE",
                         help="a sensor-suite setting (gpf_nav.sensor_suite.SuiteConfig), e.g. trn_latency=4")
+    parser.add_argument("--fix-gate", type=float, default=FIX_GATE, metavar="P",
+                        help="refuse a TRN fix beyond this chi-square (3 dof) quantile of its Mahalanobis "
+                             f"distance; 0 fuses every fix (default {FIX_GATE})")
     parser.add_argument("--out", type=Path, default=Path("sensors-results"), help="output directory")
     parser.add_argument("--no-plots", action="store_true", help="do not draw the figure")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -287,13 +317,15 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"--suite: expected KEY=VALUE, got {bad[0]!r}")
         suite = SuiteConfig.from_dict(dict(item.split("=", 1) for item in args.suite))
         suite.check_grid(config.dt)
+        if not 0.0 <= args.fix_gate < 1.0:
+            raise ValueError(f"--fix-gate must lie in [0, 1), got {args.fix_gate}")
         filters = parse_filters(args.filters) if args.filters else DEFAULT_FILTERS
     except (ValueError, TypeError) as err:
         parser.error(str(err))
     commit = git_commit()
     start = time.perf_counter()
     report, figure = campaign(config, suite, args.runs, args.seed, filters, args.particles, args.workers,
-                              not args.no_progress)
+                              not args.no_progress, args.fix_gate)
     report["meta"] = {"command": "gpf-nav sensors " + " ".join(argv), "commit": commit,
                       "wall_seconds": time.perf_counter() - start}
     args.out.mkdir(parents=True, exist_ok=True)

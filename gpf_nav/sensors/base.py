@@ -113,6 +113,31 @@ class Sensor(ABC):
         return measurement_mean(y, weights, self.angular)
 
 
+def innovation_distance(sensor: Sensor, y: np.ndarray, mean: np.ndarray, cov: np.ndarray,
+                        t: float = 0.0) -> tuple[float, int]:
+    """``(d^2, k)``: the squared Mahalanobis distance of the ``k`` measured (finite) components of ``y``
+    ``(m,)`` from the prediction of an estimate ``N(mean (n,), cov (n, n))``, linearised at the mean,
+    ``d^2 = r^T (H P H^T + R)^-1 r`` with ``r`` the residual; chi-square with ``k`` degrees of freedom
+    when the estimate and the sensor are right (a whole-measurement gate). ``(inf, k)`` when the
+    innovation covariance is not positive definite; ``(0.0, 0)`` when nothing is measured."""
+    y = np.asarray(y, dtype=float)
+    rows = np.isfinite(y)
+    k = int(rows.sum())
+    if not k:
+        return 0.0, 0
+    x = np.asarray(mean, dtype=float)[None]
+    h, H = sensor.measure_and_jacobian(x, t)
+    r = sensor.residual(y, h[0])[rows]
+    H = H[0][rows]
+    S = H @ np.asarray(cov, dtype=float) @ H.T + np.asarray(sensor.noise(t))[np.ix_(rows, rows)]
+    try:
+        L = np.linalg.cholesky(0.5 * (S + S.T))
+    except np.linalg.LinAlgError:
+        return math.inf, k
+    w = np.linalg.solve(L, r)
+    return float(w @ w), k
+
+
 class Padded(Sensor):
     """``sensor`` seen from a state with extra components after the user's ``n`` (model-error
     compensation): it measures ``x[:, :n]`` and its Jacobian gets zero columns up to ``total``."""
