@@ -38,6 +38,7 @@ BAD = [
     (["sensors", "--suite", "trn_period=3"], "must be a multiple of the step dt = 2.0 s"),
     (["sensors", "--case", "half"], "case must be one of"),
     (["sensors", "--fix-gate", "1"], "--fix-gate must lie in [0, 1), got 1.0"),
+    (["sensors", "--estimate-range-bias", "-1"], "--estimate-range-bias must be a non-negative std"),
     (["sensors", "--filters", "KF9000"], "unknown filter(s) ['kf9000']"),
     (["record"], "the following arguments are required: OUT"),
     (["record", "/nonexistent/bag", "--duration", "0"], "--duration: '0' is not a positive number"),

@@ -33,11 +33,12 @@ from gpf_nav.experiments import metrics
 from gpf_nav.experiments.montecarlo import git_commit, parse_filters, write_json
 from gpf_nav.experiments.parallel import map_tasks
 from gpf_nav.experiments.runner import ALIASES, DEFAULT_PARTICLES, _make_filter, run_seeds
+from gpf_nav.filters import SensorBiasFilter
 from gpf_nav.filters.gating import OUTLIER_GATE_LIMIT
 from gpf_nav.models.lunar import MOON_RADIUS
 from gpf_nav.scenario import ScenarioConfig, filter_model, generate
 from gpf_nav.sensor_suite import SuiteConfig, SuiteData, generate_suite, suite_sensors
-from gpf_nav.sensors import innovation_distance
+from gpf_nav.sensors import ModelSensor, innovation_distance, random_constant_bias
 
 SCHEMA = "gpf_nav.sensor_campaign/1"
 MODES = ("rae", "full")
@@ -58,7 +59,8 @@ def fuse(flt, scenario, suite: SuiteData | None, fix_gate: float = 0.0) -> dict:
     the estimate, not the fix, is taken to be off); 0 fuses every fix. Returns the per-step
     ``position_error`` (m), ``velocity_error`` (m/s), ``nees`` (six states), ``fixes`` (TRN fixes fused),
     ``refused`` (fixes refused by ``fix_gate``), ``gated`` (components the filter's own gate refused),
-    ``seconds``, ``error`` (a message if the filter raised or went non-finite, else None).
+    ``seconds``, ``error`` (a message if the filter raised or went non-finite, else None) and
+    ``range_bias`` (the final estimate of a range bias and its sigma, m, when ``flt`` estimates one).
     """
     steps, dt = scenario.times.shape[0], scenario.config.dt
     sensors = suite_sensors(suite.config) if suite is not None else {}
@@ -124,13 +126,16 @@ def fuse(flt, scenario, suite: SuiteData | None, fix_gate: float = 0.0) -> dict:
     return {"position_error": np.linalg.norm(errors[:, :3], axis=1),
             "velocity_error": np.linalg.norm(errors[:, 3:], axis=1),
             "nees": metrics.nees(errors, covariances), "fixes": fused, "refused": sum(refused.values()),
-            "gated": int(getattr(flt, "gated", 0)), "seconds": time.perf_counter() - start, "error": error}
+            "gated": int(getattr(flt, "gated", 0)), "seconds": time.perf_counter() - start, "error": error,
+            "range_bias": (tuple(float(v[0]) for v in flt.sensor_bias("rae"))
+                           if "rae" in getattr(flt, "sensor_names", ()) else None)}
 
 
 @dataclass(frozen=True)
 class SuiteTask:
     """One run: scenario ``config`` and ``suite`` settings, run ``run`` of a campaign seeded ``seed``;
-    ``fix_gate`` as :func:`fuse`'s."""
+    ``fix_gate`` as :func:`fuse`'s; ``range_bias_std`` > 0: every filter estimates a constant range
+    bias of that prior std (m) as a state (:class:`~gpf_nav.filters.SensorBiasFilter`)."""
 
     index: int
     run: int
@@ -140,6 +145,7 @@ class SuiteTask:
     filters: tuple[str, ...] = DEFAULT_FILTERS
     n_particles: int = DEFAULT_PARTICLES
     fix_gate: float = FIX_GATE
+    range_bias_std: float = 0.0
 
 
 def run_task(task: SuiteTask) -> dict:
@@ -155,10 +161,18 @@ def run_task(task: SuiteTask) -> dict:
     model = filter_model(task.config)
     for name in task.filters:
         out["filters"][name] = {
-            mode: fuse(_make_filter(name, model, task.n_particles, filter_seed), scenario,
-                       suite if mode == "full" else None, task.fix_gate)
+            mode: fuse(_build(name, model, task, filter_seed), scenario, suite if mode == "full" else None,
+                       task.fix_gate)
             for mode in MODES}
     return out
+
+
+def _build(name: str, model, task: SuiteTask, seed: int):
+    """Filter ``name`` on ``model``, with a range-bias state when ``task.range_bias_std`` > 0."""
+    if not task.range_bias_std:
+        return _make_filter(name, model, task.n_particles, seed)
+    rae = ModelSensor(model, "rae", bias=random_constant_bias([task.range_bias_std, 0.0, 0.0]))
+    return SensorBiasFilter(lambda m: _make_filter(name, m, task.n_particles, seed), model, [rae])
 
 
 def _rmse(series: np.ndarray) -> float:
@@ -188,6 +202,8 @@ def summarise(results: list[dict], filters: tuple[str, ...]) -> dict:
                 "fixes": metrics.mean_std([s["fixes"] for s in good]),
                 "refused": metrics.mean_std([s["refused"] for s in good]),
                 "gated": metrics.mean_std([s["gated"] for s in good]),
+                "range_bias_m": metrics.mean_std([s["range_bias"][0] for s in good if s["range_bias"]]),
+                "range_bias_sigma_m": metrics.mean_std([s["range_bias"][1] for s in good if s["range_bias"]]),
                 "failed_runs": len(runs) - len(good),
                 "seconds": float(np.mean([s["seconds"] for s in runs])),
             }
@@ -204,13 +220,17 @@ def summarise(results: list[dict], filters: tuple[str, ...]) -> dict:
 
 def campaign(config: ScenarioConfig, suite: SuiteConfig, runs: int = 20, seed: int = 0,
              filters: tuple[str, ...] = DEFAULT_FILTERS, n_particles: int = DEFAULT_PARTICLES,
-             workers: int | None = None, progress: bool = True, fix_gate: float = FIX_GATE) -> tuple[dict, dict]:
+             workers: int | None = None, progress: bool = True, fix_gate: float = FIX_GATE,
+             range_bias_std: float = 0.0) -> tuple[dict, dict]:
     """Run the campaign; returns ``(report, per-step data for the figure)``."""
-    tasks = [SuiteTask(i, i, seed, config, suite, tuple(filters), n_particles, fix_gate) for i in range(runs)]
+    tasks = [SuiteTask(i, i, seed, config, suite, tuple(filters), n_particles, fix_gate, range_bias_std)
+             for i in range(runs)]
     results = map_tasks(run_task, tasks, workers=workers, progress=progress, description="sensor-suite runs")
     report = {"schema": SCHEMA,
               "settings": {"runs": runs, "seed": seed, "n_particles": n_particles, "filters": list(filters),
-                           "fix_gate": fix_gate,
+                           "fix_gate": fix_gate, "range_bias_std_m": range_bias_std,
+                           "scenario_range_bias_m": config.measurement_bias_sigma[0] * config.range_noise_std
+                                                    * config.measurement_noise_scale,
                            "scenario": config.to_dict(), "suite": dataclasses.asdict(suite),
                            "second_half_from_s": float(results[0]["times"][results[0]["times"].shape[0] // 2]),
                            "outlier_fixes_mean": float(np.mean([r["outliers"] for r in results]))},
@@ -227,6 +247,9 @@ def markdown(report: dict) -> str:
     """The campaign's table (Markdown)."""
     s = report["settings"]
     gate = f"TRN fix gate at the {s['fix_gate']} chi-square quantile" if s["fix_gate"] else "no TRN fix gate"
+    if s["range_bias_std_m"]:
+        gate += (f"; range bias {s['scenario_range_bias_m']:.0f} m, estimated (a constant of prior std "
+                 f"{s['range_bias_std_m']:.0f} m)")
     lines = [f"{s['runs']} runs, seed {s['seed']}, {s['n_particles']} particles, {gate}; second half from "
              f"t = {s['second_half_from_s']:.0f} s; {s['outlier_fixes_mean']:.1f} outlier TRN fixes per run "
              f"on average.", "",
@@ -247,6 +270,11 @@ def markdown(report: dict) -> str:
         ratio = entry["second_half_position_ratio"]
         lines.append(f"- {name}: second-half position RMSE, full suite / rae only = {ratio['of_means']:.3f} "
                      f"(of the means; largest single run {ratio['largest_per_run']:.3f}).")
+        for mode in MODES if s["range_bias_std_m"] else ():
+            bias, sigma = entry[mode]["range_bias_m"], entry[mode]["range_bias_sigma_m"]
+            lines.append(f"  - {'rae only' if mode == 'rae' else 'full suite'}: final range-bias estimate "
+                         f"{bias['mean']:.1f} ± {bias['std']:.1f} m over the runs, its sigma "
+                         f"{sigma['mean']:.1f} m (the truth's: {s['scenario_range_bias_m']:.0f} m).")
     return "\n".join(lines) + "\n"
 
 
@@ -305,12 +333,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--fix-gate", type=float, default=FIX_GATE, metavar="P",
                         help="refuse a TRN fix beyond this chi-square (3 dof) quantile of its Mahalanobis "
                              f"distance; 0 fuses every fix (default {FIX_GATE})")
+    parser.add_argument("--range-bias", type=float, default=0.0, metavar="SIGMAS",
+                        help="a constant range bias in the data, in range sigmas (the scenario's "
+                             "measurement_bias_sigma)")
+    parser.add_argument("--estimate-range-bias", type=float, default=0.0, metavar="STD",
+                        help="every filter estimates a constant range bias of this prior std, m (0: none)")
     parser.add_argument("--out", type=Path, default=Path("sensors-results"), help="output directory")
     parser.add_argument("--no-plots", action="store_true", help="do not draw the figure")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
     try:
-        overrides = {"case": args.case} | ({"duration": args.duration} if args.duration else {})
+        overrides = ({"case": args.case, "measurement_bias_sigma": (args.range_bias, 0.0, 0.0)}
+                     | ({"duration": args.duration} if args.duration else {}))
+        if not (math.isfinite(args.estimate_range_bias) and args.estimate_range_bias >= 0.0):
+            raise ValueError(f"--estimate-range-bias must be a non-negative std, got {args.estimate_range_bias}")
         config = dataclasses.replace(ScenarioConfig(), **overrides)
         bad = [item for item in args.suite if "=" not in item]
         if bad:
@@ -325,7 +361,7 @@ def main(argv: list[str] | None = None) -> int:
     commit = git_commit()
     start = time.perf_counter()
     report, figure = campaign(config, suite, args.runs, args.seed, filters, args.particles, args.workers,
-                              not args.no_progress, args.fix_gate)
+                              not args.no_progress, args.fix_gate, args.estimate_range_bias)
     report["meta"] = {"command": "gpf-nav sensors " + " ".join(argv), "commit": commit,
                       "wall_seconds": time.perf_counter() - start}
     args.out.mkdir(parents=True, exist_ok=True)
