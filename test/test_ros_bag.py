@@ -308,7 +308,7 @@ def _garbage_bag(path: Path, topic: str):
         (at, topic, rae(at, (math.nan, math.nan, math.nan))),                # no_measured_component
         (at, topic, rae(at, (math.inf, y0[1], y0[2]))),                      # non_finite
         (at, topic, rae(at, y0, frame="map")),                               # wrong_frame
-        (at, topic, rae(start + 10 * S, y0)),                                # stale_stamp (out of order)
+        (at, topic, rae(start + 5 * S, y0)),                                 # older_than_history (> 10 s)
         (at, topic, rae(at, y0, nanosec=2_000_000_000)),                     # bad_stamp
         (at, topic, rae(at + 100 * S, y0)),                                  # future_stamp (max_future 1 s)
         (at, topic, b"\x00\x01\x00\x00\x07"),                                # does not deserialise
@@ -325,7 +325,7 @@ def _garbage_bag(path: Path, topic: str):
         for t_ns, name, data in records:
             writer.write(conns[name], t_ns, data)
     expected = {"non_positive_range": 1, "no_measured_component": 1, "non_finite": 2, "wrong_frame": 3,
-                "stale_stamp": 1, "bad_stamp": 1, "future_stamp": 1}
+                "older_than_history": 1, "bad_stamp": 1, "future_stamp": 1}
     return expected, 1, 1, len(scenario.times)
 
 

@@ -266,7 +266,7 @@ def test_bad_inputs_are_dropped_counted_and_never_leak_nan(ros):
         ("angle_out_of_range", rae, _rae(stamp[4], [y[4][0], 4.0, y[4][2]])),
         ("angle_out_of_range", rae, _rae(stamp[4], [y[4][0], y[4][1], -2.0])),
         ("bad_stamp", rae, _rae(stamp[4], y[4], nanosec=1_000_000_000)),
-        ("stale_stamp", rae, _rae(stamp[1], y[1])),
+        ("older_than_history", rae, _rae(stamp[1] - 20 * S, y[1])),  # history_length 10 s
         ("future_stamp", rae, _rae(now + 3600 * S, y[4])),
         ("wrong_frame", rae, _rae(stamp[4], y[4], frame="map")),
         ("non_unit_quaternion", imu, _imu(stamp[3] + S, quat=(0.0, 0.0, 0.5, 1.0))),

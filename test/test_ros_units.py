@@ -205,7 +205,7 @@ def _stamp(scenario, k):
 
 def test_engine_tracks_and_refuses_stale_and_future():
     s = generate(SHORT, 1)
-    eng, _ = _engine(s)
+    eng, _ = _engine(s, history_length=0.0)  # without a history (late stamps: test_engine_sensors.py)
     assert eng.initialized and eng.init_source == "parameters"
     for k in range(10):
         assert eng.measurement(_stamp(s, k), s.measurements[k], _stamp(s, k)) == (True, "")
@@ -321,6 +321,8 @@ class _Exploding:
         self.inner, self.after, self.updates = inner, after, 0
 
     def __getattr__(self, name):
+        if name == "inner":  # not set yet (copy.deepcopy builds the copy without __init__)
+            raise AttributeError(name)
         return getattr(self.inner, name)
 
     def update(self, y):

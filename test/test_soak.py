@@ -19,11 +19,12 @@ def test_ledger_predicts_the_estimator_timing_rules():
     assert ledger.verdict(10 * S) == "accepted"
     assert ledger.verdict(10 * S) == "accepted"          # equal stamp (a duplicate): accepted
     assert ledger.verdict(12 * S) == "accepted"
-    assert ledger.verdict(11 * S) == "stale_stamp"       # a reordered message
+    assert ledger.verdict(11 * S) == "accepted"          # a reordered message: fused at its stamp
+    assert ledger.verdict(1 * S) == "older_than_history"
     assert ledger.verdict(13 * S, "wrong_frame") == "wrong_frame"
     assert ledger.verdict(12 * S + 1) == "accepted"      # garbage never moves the newest stamp
-    assert ledger.sent == 6 and ledger.expected_accepted == 4
-    assert ledger.expected_rejected["stale_stamp"] == 1 and ledger.expected_rejected["wrong_frame"] == 1
+    assert ledger.sent == 7 and ledger.expected_accepted == 5
+    assert ledger.expected_rejected["older_than_history"] == 1 and ledger.expected_rejected["wrong_frame"] == 1
 
 
 def test_short_soak_accounts_for_every_message(monkeypatch, capsys):
@@ -51,8 +52,8 @@ def test_short_soak_accounts_for_every_message(monkeypatch, capsys):
     counted = {row["reason"]: row["counted"] for row in s["reasons"]}
     for kind, reason in GARBAGE:
         assert counted[reason] >= s["garbage"][kind]
-    assert counted["stale_stamp"] == s["garbage"]["stale_stamp"] + s["delayed_verdicts"].get("stale_stamp", 0)
-    assert set(s["delayed_verdicts"]) == {"stale_stamp"} and set(s["duplicate_verdicts"]) == {"accepted"}
+    assert counted["older_than_history"] == s["garbage"]["old_stamp"]
+    assert set(s["delayed_verdicts"]) == {"accepted"} and set(s["duplicate_verdicts"]) == {"accepted"}
     assert counted["internal_error"] == counted["filter_error"] == counted["rate_limit"] == 0
 
     # outputs, memory, health

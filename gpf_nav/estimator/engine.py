@@ -4,10 +4,19 @@
 the message-level checks of :mod:`gpf_nav.estimator.validation` and publishes. Times are integer nanoseconds
 of ROS time. Rules:
 
-* A measurement at stamp ``t`` runs ``predict((t - t_filter) s, u)`` then ``update(y)``, ``u`` being the
-  world-frame specific force of the latest IMU message stamped strictly before ``t`` (zero-order hold;
-  none when there is no such sample within ``imu_timeout`` s before ``t``). Stamps older than the last processed measurement are
-  refused (``stale_stamp``), more than ``max_future`` s ahead of the node clock too (``future_stamp``).
+* A measurement at stamp ``t`` runs ``predict((t - t_filter) s, u)`` then ``update(y, sensor)``, ``u`` being
+  the world-frame specific force of the latest IMU message stamped strictly before ``t`` (zero-order hold;
+  none when there is no such sample within ``imu_timeout`` s before ``t``); ``sensor`` None is the model's
+  own measurement (rae, range). A stream with a gate (``gates``) is first tested on the predicted estimate
+  (:func:`gpf_nav.sensors.innovation_distance`, chi-square): refused as ``innovation_gate`` (the filter
+  stays predicted to ``t``) unless ``gate_limit`` were refused in a row.
+* A measurement stamped before the filter's time, by at most ``history_length`` s, is fused at its own
+  stamp: the filter is restored from the snapshot taken before the first input stamped after it (see
+  :mod:`gpf_nav.estimator.history`), updated with it, and the later inputs are re-applied; the result
+  equals in-order delivery bit for bit. Older stamps are refused (``older_than_history``), and so are
+  stamps within it but before the filter's (re-)initialisation (``stale_stamp``); more than ``max_future`` s ahead of the
+  node clock too (``future_stamp``). With ``history_length`` 0 every stamp before the filter's time is
+  ``stale_stamp``.
 * Initialisation, first match wins: the ``initial_state`` parameter (at ``initial_stamp``, or at the
   first measurement when that is negative); a ``set_state`` (full state) or ``set_pose`` (position)
   message; else the first ``init_window`` measurements through
@@ -29,15 +38,22 @@ import copy
 import time
 from collections import deque
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Callable
 
 import numpy as np
 
+from scipy.stats import chi2
+
 from gpf_nav.integrity import CostateMonitor, IntegrityStatus
+from gpf_nav.estimator.history import Entry, History
 from gpf_nav.estimator.initialization import batch_initial_state
+from gpf_nav.sensors import innovation_distance
 from gpf_nav.estimator.validation import Counters, RateLimiter, check_timing
 
 NS = 1_000_000_000
+IMU_SAMPLES = 4096
+"""IMU samples kept (the zero-order hold looks them up, also when re-applying the history)."""
 LEVEL_RANK = {"OK": 0, "WARN": 1, "FAULT": 2}
 
 
@@ -57,6 +73,9 @@ class EngineConfig:
     reinit_hold: float = 10.0               # s (steady clock) the ERROR level is held after it
     monitor: dict | None = field(default_factory=dict)  # CostateMonitor keyword arguments; None: disabled
     monitor_hold: float = 5.0               # s (steady clock) a monitor WARN/FAULT stays reported; < 0: until reset
+    history_length: float = 10.0            # s, late measurements within this are fused at their stamp; 0: none
+    gates: dict = field(default_factory=dict)  # stream -> chi-square probability of its innovation gate; 0: off
+    gate_limit: int = 5                     # after this many gate refusals in a row the next one is used
 
 
 @dataclass(frozen=True)
@@ -91,6 +110,11 @@ class IntegrityReport:
     warn_updates: int = 0
     resets: int = 0
     error: str = ""
+
+
+@lru_cache(maxsize=64)
+def _chi2_threshold(probability: float, dof: int) -> float:
+    return float(chi2.ppf(probability, dof))
 
 
 class EstimatorEngine:
@@ -133,7 +157,11 @@ class EstimatorEngine:
         self.cov: np.ndarray | None = None
         self.version = 0                      # bumps at every change of the filter state
         self._good: tuple[np.ndarray, np.ndarray, int] | None = None
-        self._imu: deque[tuple[int, np.ndarray]] = deque(maxlen=256)
+        self._imu: deque[tuple[int, np.ndarray]] = deque(maxlen=IMU_SAMPLES)
+        self.history = History(int(round(self.config.history_length * NS)))
+        self._streaks: dict[str, int] = {}   # gate refusals in a row per stream
+        self.late_count = 0                   # late measurements fused at their stamp
+        self.replayed_count = 0               # inputs re-applied after them
         self._init_buffer: list[tuple[int, np.ndarray]] = []
         self.init_failures = 0                # batch fits that did not determine the state
         self._shadow = None
@@ -162,8 +190,11 @@ class EstimatorEngine:
         self.filter = fresh
         self._core_recoveries = getattr(self.filter, "recoveries", 0)
         self.t_ns = int(t_ns)
+        self._init_ns = int(t_ns)
         self.init_source = source
         self._init_buffer = []
+        self.history.clear()
+        self._streaks = {}
         self._reset_monitor()
         self._store(t_ns)
 
@@ -180,52 +211,116 @@ class EstimatorEngine:
 
     # --- inputs ----------------------------------------------------------------------------------------
     def measurement(self, stamp_ns: int, y: np.ndarray, now_ns: int | None,
-                    stream: str = "rae") -> tuple[bool, str]:
-        """Use measurement ``y`` ``(m,)`` (NaN = not measured) taken at ``stamp_ns``.
+                    stream: str = "rae", sensor=None) -> tuple[bool, str]:
+        """Use measurement ``y`` ``(m,)`` (NaN = not measured) taken at ``stamp_ns`` by ``sensor`` (a
+        :class:`gpf_nav.sensors.Sensor`; None: the model's own measurement).
 
-        Returns ``(True, "")`` when the filter was updated (``mean``/``cov`` are then at ``stamp_ns``),
-        ``(True, "buffered")`` when it was kept for the initialisation, else ``(False, reason)``; the
-        counters are updated either way.
+        Returns ``(True, "")`` when the filter was updated (``mean``/``cov`` are then at the filter's
+        time: ``stamp_ns``, or later for a late measurement), ``(True, "buffered")`` when it was kept
+        for the initialisation, else ``(False, reason)``; the counters are updated either way.
         """
-        ok, reason = check_timing(stamp_ns, self.last_measurement_ns, now_ns,
-                                  int(self.config.max_future * NS))
-        if ok and self.t_ns is not None and stamp_ns < self.t_ns:
-            ok, reason = False, "stale_stamp"  # older than the initial state (or a set_pose)
+        last = None if self.initialized else self.last_measurement_ns
+        ok, reason = check_timing(stamp_ns, last, now_ns, int(self.config.max_future * NS))
+        late = ok and self.initialized and stamp_ns < self.t_ns
+        if late:
+            ok, reason = self._late_allowed(stamp_ns)
         if ok and not self._rate.allow(self.monotonic()):
             ok, reason = False, "rate_limit"
+        if ok and not self.initialized and sensor is not None and self.config.initial_state is None:
+            ok, reason = False, "not_initialized"  # only the model's own measurements initialise
         if not ok:
             self.counters.reject(stream, reason)
             return False, reason
         y = np.asarray(y, dtype=float)
         self.counters.masked += int(np.sum(~np.isfinite(y)))
-        self.last_measurement_ns = stamp_ns
+        self.last_measurement_ns = max(stamp_ns, self.last_measurement_ns or 0)
         if not self.initialized:
             if self.config.initial_state is not None:
                 self._initialize(self.config.initial_state, np.diag(self.config.initial_std ** 2),
                                  stamp_ns, "parameters")
             else:
                 return self._buffer(stamp_ns, y, stream)
-        if not self._update(stamp_ns, y):
-            self.counters.reject(stream, "filter_error")
-            return False, "filter_error"
+        reason = self._late(stamp_ns, y, stream, sensor) if late else self._update(stamp_ns, y, stream, sensor)
+        if reason:
+            self.counters.reject(stream, reason)
+            return False, reason
         self.counters.accept(stream)
         return True, ""
 
-    def _update(self, stamp_ns: int, y: np.ndarray) -> bool:
-        """Predict to ``stamp_ns`` and update with ``y``; False after a recovery (nothing counted)."""
+    def _late_allowed(self, stamp_ns: int) -> tuple[bool, str]:
+        """Whether a measurement stamped before the filter's time can be fused at its stamp."""
+        if self.config.history_length <= 0.0:
+            return False, "stale_stamp"
+        if (self.t_ns - stamp_ns) * 1e-9 > self.config.history_length:
+            return False, "older_than_history"
+        if stamp_ns < self._init_ns:
+            return False, "stale_stamp"
+        if self.history.split(stamp_ns) is None:
+            return False, "older_than_history"
+        return True, ""
+
+    def _late(self, stamp_ns: int, y: np.ndarray, stream: str, sensor) -> str:
+        """Fuse a measurement stamped before the filter's time at its stamp, then re-apply the inputs
+        stamped after it (their counters are not counted again; the monitor is not fed again)."""
+        redo = self.history.take(self.history.split(stamp_ns))
+        first = redo[0]
+        self.filter, self.t_ns, self._streaks = first.before, first.before_ns, dict(first.streaks)
+        self._core_recoveries = getattr(self.filter, "recoveries", 0)
+        self._shadow = None
+        reason = self._update(stamp_ns, y, stream, sensor)
+        for entry in redo:
+            self._update(entry.t_ns, entry.y, entry.stream, entry.sensor, feed_monitor=False)
+        self.late_count += 1
+        self.replayed_count += len(redo)
+        return reason
+
+    def _update(self, stamp_ns: int, y: np.ndarray, stream: str = "rae", sensor=None,
+                feed_monitor: bool = True) -> str:
+        """Predict to ``stamp_ns`` and update with ``y``: ``""`` when updated, ``"innovation_gate"`` when
+        the gate refused it (predicted only), ``"filter_error"`` after a recovery."""
+        before = copy.deepcopy(self.filter) if self.history.length_ns > 0 else None
+        entry = Entry(stamp_ns, stream, y, sensor, before, self.t_ns, dict(self._streaks))
         try:
             self._predict_to(stamp_ns)
-            self.filter.update(y)
+            gated = self._gated(stream, sensor, y)
+            if not gated:
+                if sensor is None:
+                    self.filter.update(y)
+                else:
+                    self.filter.update(y, sensor)
         except Exception as err:  # noqa: BLE001 - any filter failure means: recover, never crash the node
             self._recover(stamp_ns, f"filter raised {type(err).__name__}: {err}")
-            return False
+            return "filter_error"
         if not self._store(stamp_ns):
             self._recover(stamp_ns, "non-finite mean or covariance after the update")
-            return False
-        if not self._check_core_recovery():
+            return "filter_error"
+        if before is not None:
+            self.history.append(entry)
+        if gated:
+            return "innovation_gate"
+        if not self._check_core_recovery() and feed_monitor and sensor is None:
             self._feed_monitor(y)
-        self._prev_y = y
+        if sensor is None:
+            self._prev_y = y
         self.last_update_ns = stamp_ns
+        return ""
+
+    def _gated(self, stream: str, sensor, y: np.ndarray) -> bool:
+        """The innovation gate of ``stream`` (a sensor object's streams only) on the predicted estimate;
+        True refuses ``y``. Counts the refusals in a row; after ``gate_limit`` the next one passes."""
+        probability = self.config.gates.get(stream, 0.0)
+        if sensor is None or probability <= 0.0:
+            return False
+        d2, k = innovation_distance(sensor, y, self.filter.mean, self.filter.covariance,
+                                    getattr(self.filter, "time", 0.0))
+        if k == 0 or d2 <= _chi2_threshold(probability, k):
+            self._streaks[stream] = 0
+            return False
+        streak = self._streaks.get(stream, 0)
+        if streak >= self.config.gate_limit:
+            self._streaks[stream] = 0
+            return False
+        self._streaks[stream] = streak + 1
         return True
 
     def _check_core_recovery(self) -> bool:

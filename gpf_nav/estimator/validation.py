@@ -14,7 +14,12 @@ the counts in ``/diagnostics`` (see ``docs/ros.md``). The reasons are:
 ``angle_out_of_range``       azimuth outside [-pi, pi] or elevation outside [-pi/2, pi/2]
 ``non_unit_quaternion``      an orientation given but ``| |q| - 1 |`` above the tolerance
 ``not_provided``             ``linear_acceleration_covariance[0] == -1`` (the field is not provided)
-``stale_stamp``              older than the last processed message of the same stream
+``stale_stamp``              older than the last processed message of the same stream (IMU; measurements
+                             before initialisation or with ``history_length`` 0), or before the
+                             filter's (re-)initialisation
+``older_than_history``       a measurement stamped more than ``history_length`` s before the filter's time
+``not_positive_definite``    a message's covariance block is not symmetric positive definite
+``innovation_gate``          refused by the stream's innovation gate (chi-square, ``<stream>_gate``)
 ``future_stamp``             more than ``max_future`` seconds ahead of the node clock
 ``rate_limit``               above ``max_measurement_rate`` messages per second
 ``not_initialized``          arrived before the filter could be initialised and not usable for it
@@ -32,6 +37,7 @@ REASONS = (
     "bad_stamp", "wrong_frame", "non_finite", "no_measured_component", "non_positive_range",
     "range_out_of_limits", "angle_out_of_range", "non_unit_quaternion", "not_provided", "stale_stamp",
     "future_stamp", "rate_limit", "not_initialized", "no_velocity", "filter_error", "internal_error",
+    "older_than_history", "not_positive_definite", "innovation_gate",
 )
 
 OK = (True, "")

@@ -18,12 +18,13 @@ the start RSS is read then) each measurement from the simulator, with a seeded r
 * followed by one ``garbage`` message (``--garbage``) and by a ``burst`` of ``--burst-size`` garbage
   messages back to back (``--burst``). Garbage kinds are taken in turn from :data:`GARBAGE`:
   all-NaN, inf range, negative range, azimuth beyond pi, ``nanosec >= 1e9``, a stamp 1e6 s in the
-  future, a stamp 600 s old, a wrong ``frame_id``.
+  future, a stamp 600 s old (beyond the estimator's ``history_length``), a wrong ``frame_id``.
 
 The injector predicts the estimator's verdict on every message it sends with the estimator's own rules
 (docs/ros.md, *Bad input*): a garbage kind has exactly one refusal reason; a message whose stamp is older
-than the newest one already accepted is ``stale_stamp`` (so every delayed message, released after a
-newer one, is stale); an equal stamp is accepted (so a duplicate is accepted and used twice: the second
+than the newest one already accepted by at most ``history_length`` (10 s, the estimator's default) is
+accepted and fused at its stamp (so a delayed message, released after 1-3 newer ones, is accepted),
+an older one is ``older_than_history``; an equal stamp is accepted (so a duplicate is accepted and used twice: the second
 copy is a ``dt = 0`` update, which the integrity monitor skips). At the end the predicted counts are
 compared with the ``rejected <reason>`` and ``accepted rae`` counters of the estimator's last
 ``/diagnostics``: every message sent must be accounted for, reason by reason.
@@ -62,11 +63,12 @@ GARBAGE = (  # kind -> the single reason the estimator must give
     ("bad_azimuth", "angle_out_of_range"),
     ("bad_nanosec", "bad_stamp"),
     ("future_stamp", "future_stamp"),
-    ("stale_stamp", "stale_stamp"),
+    ("old_stamp", "older_than_history"),
     ("wrong_frame", "wrong_frame"),
 )
 FUTURE_S = 1_000_000   # s ahead of the stamp for future_stamp (far beyond max_future)
-STALE_S = 600          # s behind the stamp for stale_stamp
+OLD_S = 600            # s behind the stamp for old_stamp
+HISTORY_S = 10.0       # s, the estimator's default history_length (late stamps within it are fused)
 STREAM_CATEGORIES = ("passed", "dropped", "delayed", "duplicated", "masked")
 
 
@@ -140,7 +142,8 @@ def _slope_per_hour(samples: list[tuple[float, float, int]]) -> float | None:
 class Ledger:
     """What the injector did and what the estimator must say about it (pure bookkeeping, no ROS)."""
 
-    def __init__(self):
+    def __init__(self, history_s: float = HISTORY_S):
+        self.history_ns = int(round(history_s * NS))
         self.stream = Counter({c: 0 for c in STREAM_CATEGORIES})   # per simulator measurement
         self.garbage = Counter({k: 0 for k, _ in GARBAGE})         # garbage messages by kind
         self.singles = 0                                           # garbage messages sent alone
@@ -157,8 +160,8 @@ class Ledger:
     def verdict(self, stamp_ns: int, reason: str = "") -> str:
         """Record one message sent: ``reason`` for garbage, else the timing rule decides."""
         self.sent += 1
-        if not reason and self.newest_ns is not None and stamp_ns < self.newest_ns:
-            reason = "stale_stamp"
+        if not reason and self.newest_ns is not None and stamp_ns < self.newest_ns - self.history_ns:
+            reason = "older_than_history"
         if reason:
             self.expected_rejected[reason] += 1
             return reason
@@ -215,8 +218,8 @@ class Injector:
             v = [r, 4.0, e]
         elif kind == "future_stamp":
             stamp = stamp_ns + FUTURE_S * NS
-        elif kind == "stale_stamp":
-            stamp = max(0, stamp_ns - STALE_S * NS)
+        elif kind == "old_stamp":
+            stamp = max(0, stamp_ns - OLD_S * NS)
         elif kind == "wrong_frame":
             frame = "map"
         msg = self._msg(stamp, v, frame)

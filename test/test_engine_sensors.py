@@ -1,0 +1,115 @@
+"""The estimator engine with sensors of their own, late measurements and innovation gates (no ROS):
+a TRN fix delivered after later measurements is fused at its stamp and gives, bit for bit, the
+estimate of in-order delivery; stamps older than the history are refused and counted."""
+import numpy as np
+import pytest
+
+from gpf_nav.estimator.engine import EngineConfig, EstimatorEngine
+from gpf_nav.estimator.factory import make_filter
+from gpf_nav.scenario import ScenarioConfig, filter_model, generate
+from gpf_nav.sensor_suite import SuiteConfig, generate_suite, suite_sensors
+
+S = 1_000_000_000
+T0 = 100 * S
+
+
+class _Clock:
+    def __call__(self):
+        return 0.0
+
+
+def _setup(name, history_length=10.0, **kw):
+    scenario = generate(ScenarioConfig(duration=120.0), 3)
+    suite = generate_suite(scenario, SuiteConfig(trn_outlier_probability=0.0, altimeter_max_altitude=1e9,
+                                                 velocimeter_max_altitude=1e9), 3)
+    model = filter_model(scenario.config)
+    cfg = EngineConfig(initial_state=scenario.prior_mean, initial_std=np.sqrt(np.diag(scenario.prior_cov)),
+                       initial_stamp=T0 * 1e-9, history_length=history_length, **kw)
+    engine = EstimatorEngine(lambda: make_filter(name, model, n_particles=200, seed=5), model, cfg, _Clock())
+    return scenario, suite, suite_sensors(suite.config), engine
+
+
+def _events(scenario, suite):
+    """(stamp, stream, y) in stamp order: rae every step, the suite's sensors where they measure."""
+    out = []
+    for k, t in enumerate(scenario.times):
+        stamp = T0 + int(round(t * S))
+        out.append((stamp, "rae", scenario.measurements[k]))
+        for stream in ("altitude", "velocity", "position"):  # a late fix goes after equal stamps
+            y = getattr(suite, stream)[k]
+            if np.all(np.isfinite(y)):
+                out.append((stamp, stream, y))
+    return out
+
+
+def _run(engine, sensors, events):
+    for stamp, stream, y in events:
+        ok, reason = engine.measurement(stamp, y, None, stream, sensors.get(stream))
+        assert ok, (stream, stamp, reason)
+    return engine.mean.copy(), engine.cov.copy()
+
+
+@pytest.mark.parametrize("name", ["ekf", "gpf", "spf", "ukf"])
+def test_a_late_fix_gives_the_estimate_of_in_order_delivery(name):
+    scenario, suite, sensors, in_order = _setup(name)
+    events = _events(scenario, suite)
+    mean, cov = _run(in_order, sensors, events)
+    assert in_order.late_count == 0 and in_order.counters.accepted["position"] >= 5
+
+    *_, late = _setup(name)
+    latency = 4 * S  # every fix delivered 4 s after its stamp: after the later rae measurements
+    arrival = sorted(events, key=lambda e: e[0] + (latency if e[1] == "position" else 0))
+    late_mean, late_cov = _run(late, sensors, arrival)
+    last = events[-1][0]
+    delayed = sum(1 for stamp, stream, _ in events if stream == "position" and stamp + latency < last)
+    assert late.late_count == delayed >= 5 and late.replayed_count > 0
+    np.testing.assert_array_equal(late_mean, mean)
+    np.testing.assert_array_equal(late_cov, cov)
+    assert late.counters.accepted == in_order.counters.accepted
+
+
+def test_stamps_older_than_the_history_or_the_start_are_refused():
+    scenario, suite, sensors, engine = _setup("ekf", history_length=5.0)
+    events = [e for e in _events(scenario, suite) if e[1] == "rae"][:20]
+    fix = suite.position[np.flatnonzero(np.isfinite(suite.position[:, 0]))[0]]
+    _run(engine, sensors, events[:1])
+    assert engine.measurement(T0 - S, fix, None, "position", sensors["position"]) == (False, "stale_stamp")
+    _run(engine, sensors, events[1:])
+    t = engine.t_ns
+    assert engine.measurement(t - 6 * S, fix, None, "position", sensors["position"]) == (False, "older_than_history")
+    ok, _ = engine.measurement(t - 4 * S, fix, None, "position", sensors["position"])
+    assert ok and engine.late_count == 1 and engine.t_ns == t
+    assert engine.counters.rejected_by_stream[("position", "older_than_history")] == 1
+    assert len(engine.history) <= 5 / scenario.config.dt + 2
+
+
+def test_without_history_a_late_stamp_is_stale():
+    scenario, suite, sensors, engine = _setup("ekf", history_length=0.0)
+    events = [e for e in _events(scenario, suite) if e[1] == "rae"][:5]
+    _run(engine, sensors, events)
+    assert len(engine.history) == 0
+    assert engine.measurement(events[2][0], events[2][2], None) == (False, "stale_stamp")
+
+
+def test_the_innovation_gate_refuses_an_outlier_then_yields_after_the_limit():
+    scenario, suite, sensors, engine = _setup("ekf", gates={"position": 0.999}, gate_limit=2)
+    events = _events(scenario, suite)
+    _run(engine, sensors, [e for e in events if e[0] <= T0 + 30 * S])
+    t = engine.t_ns
+    truth = scenario.truth[1 + int(round((t - T0) / S / scenario.config.dt)), :3]
+    outlier = truth + 5e3
+    for k in (1, 2):
+        assert engine.measurement(t + k * S, outlier, None, "position", sensors["position"]) == \
+            (False, "innovation_gate")
+    assert engine.measurement(t + 3 * S, outlier, None, "position", sensors["position"]) == (True, "")
+    assert engine.counters.rejected_by_stream[("position", "innovation_gate")] == 2
+    assert np.all(np.isfinite(engine.mean))
+
+
+def test_a_sensor_measurement_does_not_initialise_from_data():
+    scenario, suite, sensors, _ = _setup("ekf")
+    model = filter_model(scenario.config)
+    engine = EstimatorEngine(lambda: make_filter("ekf", model), model, EngineConfig(), _Clock())
+    assert engine.measurement(T0, suite.velocity[1], None, "velocity", sensors["velocity"]) == \
+        (False, "not_initialized")
+    assert not engine.initialized
