@@ -56,7 +56,7 @@ ESTIMATOR = [
     # frames
     Spec("world_frame", "moon_inertial", "Frame of the state and of odometry header.frame_id (Moon-centred inertial)."),
     Spec("base_frame", "base_link", "odometry child_frame_id (axes taken aligned with world_frame)."),
-    Spec("measurement_frame", "station", "Required header.frame_id of measurements/rae and measurements/range ('' = any)."),
+    Spec("measurement_frame", "station", "Required header.frame_id of measurements/rae and measurements/range ('' = any); measurements/position and measurements/velocity must be in world_frame."),
     Spec("imu_frame", "base_link", "Required header.frame_id of imu ('' = any)."),
     # initialisation
     Spec("initial_state", None, "Initial [x, y, z, vx, vy, vz] in world_frame [m, m/s]; unset: set_state, set_pose or measurements."),
@@ -71,6 +71,23 @@ ESTIMATOR = [
     Spec("max_measurement_rate", 1000.0, "Process at most this many measurements per second (steady clock) [Hz]; 0: unlimited."),
     Spec("queue_depth", 10, "Depth of the sensor-data (best-effort) subscription queues."),
     Spec("quaternion_tolerance", 0.01, "Allowed | |q| - 1 | of an IMU orientation."),
+    # sensors beyond the model's own measurement, late measurements, biases
+    Spec("history_length", 10.0, "A measurement stamped up to this long before the filter's time is fused at its stamp (the later inputs are re-applied); older ones are refused [s]; 0: none."),
+    Spec("altitude_frame", "base_link", "Required header.frame_id of measurements/altitude ('' = any)."),
+    Spec("altitude_noise_std", 20.0, "Altitude (measurements/altitude) noise standard deviation [m]."),
+    Spec("reference_radius", 1737.4e3, "Radius of the sphere measurements/altitude is measured above [m] (the Moon's mean radius)."),
+    Spec("position_gate", 0.9999, "Innovation gate of measurements/position: chi-square probability (3 dof), in [0, 1); 0: no gate."),
+    Spec("velocity_gate", 0.9999, "Innovation gate of measurements/velocity: chi-square probability (3 dof), in [0, 1); 0: no gate."),
+    Spec("altitude_gate", 0.9999, "Innovation gate of measurements/altitude: chi-square probability (1 dof), in [0, 1); 0: no gate."),
+    Spec("gate_limit", 5, "After this many refusals of a gate in a row the next measurement of that stream is used; >= 0."),
+    Spec("range_bias_std", 0.0, "Estimate a range bias (rae and range) of this prior std [m]; 0: none."),
+    Spec("range_bias_time", 0.0, "Correlation time of the range bias [s] (first-order Gauss-Markov); 0: a random constant."),
+    Spec("position_bias_std", 0.0, "Estimate a bias per axis of measurements/position of this prior std [m]; 0: none."),
+    Spec("position_bias_time", 0.0, "Correlation time of the position bias [s]; 0: a random constant."),
+    Spec("velocity_bias_std", 0.0, "Estimate a bias per axis of measurements/velocity of this prior std [m/s]; 0: none."),
+    Spec("velocity_bias_time", 0.0, "Correlation time of the velocity bias [s]; 0: a random constant."),
+    Spec("altitude_bias_std", 0.0, "Estimate a bias of measurements/altitude of this prior std [m]; 0: none."),
+    Spec("altitude_bias_time", 0.0, "Correlation time of the altitude bias [s]; 0: a random constant."),
     # outputs and diagnostics
     Spec("max_published_particles", 100, "Particles published on gpf/particles (systematic selection); 0 disables."),
     Spec("diagnostics_period", 1.0, "Period of /diagnostics [s, steady clock]."),

@@ -33,6 +33,8 @@ from __future__ import annotations
 import math
 from collections import Counter
 
+import numpy as np
+
 REASONS = (
     "bad_stamp", "wrong_frame", "non_finite", "no_measured_component", "non_positive_range",
     "range_out_of_limits", "angle_out_of_range", "non_unit_quaternion", "not_provided", "stale_stamp",
@@ -106,6 +108,17 @@ def check_finite(*values: float) -> tuple[bool, str]:
     if all(math.isfinite(float(v)) for v in values):
         return OK
     return False, "non_finite"
+
+
+def check_covariance(cov) -> tuple[bool, str]:
+    """A covariance block ``(k, k)``: finite (``non_finite``), symmetric and positive definite
+    (``not_positive_definite``)."""
+    a = np.asarray(cov, dtype=float)
+    if not np.all(np.isfinite(a)):
+        return False, "non_finite"
+    if not np.allclose(a, a.T, rtol=1e-9, atol=0.0) or np.linalg.eigvalsh(0.5 * (a + a.T)).min() <= 0.0:
+        return False, "not_positive_definite"
+    return OK
 
 
 def check_quaternion(x: float, y: float, z: float, w: float, tolerance: float) -> tuple[bool, str]:

@@ -76,6 +76,19 @@ def rae_values(msg) -> tuple[float, float, float]:
     return float(msg.vector.x), float(msg.vector.y), float(msg.vector.z)
 
 
+def position_fix(msg) -> tuple[np.ndarray, np.ndarray]:
+    """``geometry_msgs/PoseWithCovarianceStamped`` -> position ``(3,)`` [m] and its covariance ``(3, 3)``."""
+    p = msg.pose.pose.position
+    return np.array([p.x, p.y, p.z], dtype=float), position_covariance(msg.pose.covariance)
+
+
+def velocity_fix(msg) -> tuple[np.ndarray, np.ndarray]:
+    """``geometry_msgs/TwistWithCovarianceStamped`` -> linear velocity ``(3,)`` [m/s] and its covariance
+    ``(3, 3)`` (the linear block)."""
+    v = msg.twist.twist.linear
+    return np.array([v.x, v.y, v.z], dtype=float), position_covariance(msg.twist.covariance)
+
+
 def position_covariance(pose_covariance) -> np.ndarray:
     """The ``(3, 3)`` position block of a row-major 6x6 ``PoseWithCovariance.covariance``."""
     return np.asarray(pose_covariance, dtype=float).reshape(6, 6)[:3, :3].copy()

@@ -24,6 +24,8 @@ OK, WARN, ERROR = 0, 1, 2
 STATUS_NAME = "gpf_estimator: filter"
 COMPONENT_NAMES = ("range", "azimuth", "elevation")
 INTEGRITY_LEVEL = {"OK": OK, "WARN": WARN, "FAULT": ERROR}
+MEASUREMENT_STREAMS = ("rae", "range", "position", "velocity", "altitude")
+STREAMS = (*MEASUREMENT_STREAMS, "imu", "set_state", "set_pose")
 
 
 @dataclass
@@ -78,7 +80,7 @@ def filter_status(engine, now_ns: int | None, thresholds: Thresholds, filter_nam
         problems.append(_integrity_problem(report))
     message = "; ".join(problems) if problems else "tracking"
 
-    measurements = ("rae", "range")
+    measurements = MEASUREMENT_STREAMS
     accepted = sum(c.accepted[s] for s in measurements)
     rejected = sum(n for (stream, _), n in c.rejected_by_stream.items() if stream in measurements)
     values = [
@@ -101,13 +103,37 @@ def filter_status(engine, now_ns: int | None, thresholds: Thresholds, filter_nam
         ("last measurement age", _fmt(age) if age is not None else "none yet"),
         ("reinitializations", str(engine.reinit_count)),
     ]
-    for stream in ("rae", "range", "imu", "set_state", "set_pose"):
+    for stream in STREAMS:
         values.append((f"accepted {stream}", str(c.accepted[stream])))
     for reason in REASONS:
         values.append((f"rejected {reason}", str(c.rejected[reason])))
+    values.extend(stream_values(engine))
     if report is not None:
         values.extend(integrity_values(report, filter_name))
     return level, message, values
+
+
+def stream_values(engine) -> list[tuple[str, str]]:
+    """Per-stream refusals (``rejected <stream>`` always; ``rejected <stream> <reason>`` when counted),
+    the late-measurement history and the estimated sensor biases (``bias <sensor>``, ``bias std <sensor>``:
+    one value per component, in the measurement's units)."""
+    c = engine.counters
+    values = []
+    for stream in STREAMS:
+        by_reason = {reason: n for (s, reason), n in c.rejected_by_stream.items() if s == stream and n}
+        values.append((f"rejected {stream}", str(sum(by_reason.values()))))
+        values.extend((f"rejected {stream} {reason}", str(n)) for reason, n in sorted(by_reason.items()))
+    history = getattr(engine, "history", None)
+    if history is not None:
+        span = (history.entries[-1].t_ns - history.entries[0].t_ns) * 1e-9 if len(history) else 0.0
+        values += [("late measurements fused", str(engine.late_count)),
+                   ("inputs re-applied", str(engine.replayed_count)),
+                   ("history inputs", str(len(history))), ("history span [s]", _fmt(span))]
+    f = engine.filter
+    for name in getattr(f, "sensor_names", ()) if engine.initialized else ():
+        mean, std = f.sensor_bias(name)
+        values += [(f"bias {name}", _vector(mean)), (f"bias std {name}", _vector(std))]
+    return values
 
 
 def _components(indices) -> str:

@@ -20,7 +20,7 @@ from typing import Callable
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped, Vector3Stamped
+from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped, TwistWithCovarianceStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, Range
 from std_msgs.msg import Float64
@@ -31,11 +31,14 @@ from gpf_nav.estimator import validation as val
 from gpf_nav.estimator.engine import EngineConfig, EstimatorEngine
 from gpf_nav.estimator.factory import make_filter, make_lunar_model
 from gpf_nav.estimator.params import ParameterError
+from gpf_nav.estimator.sensor_setup import build_sensors, check_sensor_parameters, gates, with_biases
 
 LOG_THROTTLE = 5.0  # s (wall clock) between two log lines about the same refusal reason
 
 INPUT_TOPICS = {"measurements/rae": ("rae", Vector3Stamped), "measurements/range": ("range", Range),
-                "imu": ("imu", Imu), "set_pose": ("set_pose", PoseWithCovarianceStamped),
+                "measurements/position": ("position", PoseWithCovarianceStamped),
+                "measurements/velocity": ("velocity", TwistWithCovarianceStamped),
+                "measurements/altitude": ("altitude", Range), "imu": ("imu", Imu), "set_pose": ("set_pose", PoseWithCovarianceStamped),
                 "set_state": ("set_state", Odometry)}
 """topic -> (stream name used in the counters, message type)."""
 
@@ -76,6 +79,7 @@ def check_estimator_parameters(p: dict) -> list[str]:
     if not p["world_frame"]:
         errors.append("parameter 'world_frame' must not be empty")
     errors.extend(check_monitor_parameters(p))
+    errors.extend(check_sensor_parameters(p))
     return errors
 
 
@@ -155,7 +159,10 @@ class EstimatorCore:
             self.model = None
         if self.model is not None:
             try:
-                make_filter(p["filter"], self.model, **filter_options(p))
+                self.sensors = build_sensors(p, self.model)
+                factory = with_biases(lambda m: make_filter(p["filter"], m, **filter_options(p)), self.model,
+                                      self.sensors)
+                factory()
             except ValueError as err:
                 errors.append(str(err))
         if errors:
@@ -166,9 +173,9 @@ class EstimatorCore:
             initial_state=None if p["initial_state"] is None else np.array(p["initial_state"]),
             initial_std=np.array(p["initial_std"]), initial_stamp=p["initial_stamp"],
             max_measurement_rate=p["max_measurement_rate"], max_extrapolation=p["max_extrapolation"],
-            reinit_hold=p["reinit_hold"], monitor=monitor_options(p), monitor_hold=p["monitor_hold"])
-        self.engine = EstimatorEngine(lambda: make_filter(p["filter"], self.model, **filter_options(p)),
-                                      self.model, config, monotonic=monotonic)
+            reinit_hold=p["reinit_hold"], monitor=monitor_options(p), monitor_hold=p["monitor_hold"],
+            history_length=p["history_length"], gates=gates(p), gate_limit=p["gate_limit"])
+        self.engine = EstimatorEngine(factory, self.model, config, monotonic=monotonic)
         self.thresholds = diag.Thresholds(ess_warn=p["ess_warn_threshold"],
                                           costate_warn=p["costate_warn_threshold"],
                                           sensor_timeout=p["sensor_timeout"])
@@ -176,6 +183,8 @@ class EstimatorCore:
         self.logger = logger
         self.wants_particles = wants_particles
         self._handlers = {"rae": self._on_rae, "range": self._on_range, "imu": self._on_imu,
+                          "position": self._on_position, "velocity": self._on_velocity,
+                          "altitude": self._on_altitude,
                           "set_pose": self._on_set_pose, "set_state": self._on_set_state}
         self._last_log: dict[str, float] = {}
         self._integrity_level = "OK"
@@ -192,7 +201,7 @@ class EstimatorCore:
 
     # --- inputs ----------------------------------------------------------------------------------------
     def handle(self, stream: str, msg, now_ns: int) -> None:
-        """Process one message of ``stream`` (``rae``, ``range``, ``imu``, ``set_pose``, ``set_state``)
+        """Process one message of ``stream`` (a value of :data:`INPUT_TOPICS`)
         received at node time ``now_ns``. An unexpected exception is counted (``internal_error``) and
         logged, never raised."""
         try:
@@ -258,8 +267,37 @@ class EstimatorCore:
             return
         self._measurement("range", stamp, np.array([float(msg.range), np.nan, np.nan]), now_ns)
 
-    def _measurement(self, stream: str, stamp: int, y: np.ndarray, now_ns: int) -> None:
-        ok, reason = self.engine.measurement(stamp, y, now_ns, stream)
+    def _on_position(self, msg: PoseWithCovarianceStamped, now_ns: int) -> None:
+        self._fix("position", msg.header, *conv.position_fix(msg), now_ns)
+
+    def _on_velocity(self, msg: TwistWithCovarianceStamped, now_ns: int) -> None:
+        self._fix("velocity", msg.header, *conv.velocity_fix(msg), now_ns)
+
+    def _fix(self, stream: str, header, y: np.ndarray, cov: np.ndarray, now_ns: int) -> None:
+        """A position or velocity fix in ``world_frame``; its noise is the message's covariance block."""
+        stamp = self._check_header(stream, header, self.params["world_frame"])
+        if stamp is None:
+            return
+        ok, reason = val.check_finite(*y)
+        if ok:
+            ok, reason = val.check_covariance(cov)
+        if not ok:
+            self._refuse(stream, reason, f"value {y.tolist()}, covariance {cov.reshape(-1).tolist()}")
+            return
+        self._measurement(stream, stamp, y, now_ns, self.sensors[stream].with_noise(cov))
+
+    def _on_altitude(self, msg: Range, now_ns: int) -> None:
+        stamp = self._check_header("altitude", msg.header, self.params["altitude_frame"])
+        if stamp is None:
+            return
+        ok, reason = val.check_range(msg.range, msg.min_range, msg.max_range)
+        if not ok:
+            self._refuse("altitude", reason, f"altitude {msg.range} with limits [{msg.min_range}, {msg.max_range}]")
+            return
+        self._measurement("altitude", stamp, np.array([float(msg.range)]), now_ns, self.sensors["altitude"])
+
+    def _measurement(self, stream: str, stamp: int, y: np.ndarray, now_ns: int, sensor=None) -> None:
+        ok, reason = self.engine.measurement(stamp, y, now_ns, stream, sensor)
         if not ok:
             if reason == "filter_error":
                 self.logger.error(f"filter re-initialised from the last good estimate: "
@@ -268,7 +306,7 @@ class EstimatorCore:
             return
         if reason == "buffered":
             return
-        self._publish(stamp, self.engine.mean, self.engine.cov, update=True)
+        self._publish(self.engine.t_ns, self.engine.mean, self.engine.cov, update=True)  # late: t_ns > stamp
         self._log_integrity(stamp)
 
     def _log_integrity(self, stamp: int) -> None:
