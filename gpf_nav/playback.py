@@ -8,9 +8,12 @@
 * ``truth`` at the start, every measurement time and every ``1 / truth_rate`` s, the state between
   truth samples by cubic Hermite interpolation of positions and velocities;
 * ``imu`` every ``1 / imu_rate`` s: the specific force held over the scenario step that contains the
-  time, plus white noise of ``imu_noise_std`` per axis from a stream seeded by ``seed``.
+  time, plus white noise of ``imu_noise_std`` per axis from a stream seeded by ``seed``;
+* with a sensor suite (:func:`gpf_nav.sensor_suite.generate_suite`): ``altitude`` and ``velocity`` at
+  the times they measure, and ``position`` (a TRN fix) released at its arrival time, ``delay_ns`` after
+  its capture, which is its stamp.
 
-At equal times the order is measurement, truth, imu, so an estimator that applies the latest IMU sample
+At equal times the order is measurement, altitude, velocity, position, truth, imu, so an estimator that applies the latest IMU sample
 stamped strictly before a measurement uses the force of the step that measurement closes.
 Same inputs and seed, same events.
 """
@@ -21,14 +24,15 @@ from dataclasses import dataclass
 import numpy as np
 
 NS = 1_000_000_000
-_ORDER = {"measurement": 0, "truth": 1, "imu": 2}
+_ORDER = {"measurement": 0, "altitude": 1, "velocity": 2, "position": 3, "truth": 4, "imu": 5}
 
 
 @dataclass(frozen=True)
 class Event:
-    t_ns: int                 # from the trajectory start
-    kind: str                 # measurement | truth | imu
-    data: tuple[float, ...]   # (range, az, el) | (x, y, z, vx, vy, vz) | (ax, ay, az)
+    t_ns: int                 # from the trajectory start, when the message goes out
+    kind: str                 # measurement | truth | imu | altitude | velocity | position
+    data: tuple[float, ...]   # (range, az, el) | (x, y, z, vx, vy, vz) | (ax, ay, az) | (h,) | (vx, vy, vz) | (x, y, z)
+    delay_ns: int = 0         # the message is stamped this long before it goes out (TRN latency)
 
 
 def _grid(span_ns: int, rate: float) -> np.ndarray:
@@ -51,8 +55,9 @@ def hermite_state(t0: float, x0: np.ndarray, t1: float, x1: np.ndarray, t: float
 
 
 def build_events(scenario, imu_rate: float, imu_noise_std: float, truth_rate: float,
-                 seed: int) -> list[Event]:
-    """The time-ordered events of ``scenario`` (see the module docstring)."""
+                 seed: int, suite=None) -> list[Event]:
+    """The time-ordered events of ``scenario`` and of ``suite`` (a
+    :class:`gpf_nav.sensor_suite.SuiteData` of it, or None) (see the module docstring)."""
     t_truth = np.concatenate([[scenario.start_time], scenario.times]) - scenario.start_time
     t_truth_ns = np.round(t_truth * NS).astype(np.int64)
     span_ns = int(t_truth_ns[-1])
@@ -80,5 +85,20 @@ def build_events(scenario, imu_rate: float, imu_noise_std: float, truth_rate: fl
     for t, k, w in zip(imu_times.tolist(), step.tolist(), noise):
         force = scenario.specific_force[k] + w
         events.append(Event(int(t), "imu", tuple(float(v) for v in force)))
+    if suite is not None:
+        events += suite_events(scenario, suite)
     events.sort(key=lambda e: (e.t_ns, _ORDER[e.kind]))
+    return events
+
+
+def suite_events(scenario, suite) -> list[Event]:
+    """``altitude``, ``velocity`` and ``position`` events of ``suite`` (rows with a measurement only)."""
+    t_ns = np.round((scenario.times - scenario.start_time) * NS).astype(np.int64)
+    events = []
+    for kind, values in (("altitude", suite.altitude), ("velocity", suite.velocity), ("position", suite.position)):
+        for k in np.flatnonzero(np.all(np.isfinite(values), axis=1)).tolist():
+            delay = 0
+            if kind == "position":
+                delay = int(round((suite.position_arrival[k] - scenario.times[k]) * NS))
+            events.append(Event(int(t_ns[k]) + delay, kind, tuple(float(v) for v in values[k]), delay))
     return events

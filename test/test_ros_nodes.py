@@ -431,6 +431,8 @@ class _TurnsNaN:
         self.inner, self.updates = inner, 0
 
     def __getattr__(self, name):
+        if name == "inner":  # not set yet (copy.deepcopy builds the copy without __init__)
+            raise AttributeError(name)
         return getattr(self.inner, name)
 
     def update(self, y):

@@ -63,24 +63,27 @@ def record(out: str, p: dict, storage: str = "mcap") -> dict:
     from rosgraph_msgs.msg import Clock
 
     from gpf_nav.ros import conversions as conv
-    from gpf_nav.playback import NS, build_events
+    from gpf_nav.playback import NS
     from gpf_nav.ros.simulator_node import (EVENT_TOPICS, HANDOVER_TOPIC, QOS_DEPTH, check_simulator_parameters,
-                                            event_message, handover_message, scenario_from_parameters)
+                                            event_message, events_from_parameters, handover_message,
+                                            scenario_from_parameters)
     errors = check_simulator_parameters(p)
     if not errors:
         try:
             _, scenario = scenario_from_parameters(p)
+            events = events_from_parameters(scenario, p)
         except (ValueError, OSError) as err:
             errors.append(f"scenario: {err}")
     if errors:
         raise ParameterError("invalid parameters: " + "; ".join(errors))
-    events = build_events(scenario, p["imu_rate"], p["imu_noise_std"], p["truth_rate"], p["seed"])
     clock = p["publish_clock"]
     epoch = int(round(p["start_time"] * NS)) if clock and p["start_time"] >= 0.0 else time.time_ns()
     span = max(e.t_ns for e in events)
     period = int(round(NS / p["clock_rate"]))
     qos = qos_profile(reliable=True, depth=QOS_DEPTH)
-    topics = {absolute(topic): (msg_type, qos) for topic, msg_type in EVENT_TOPICS.values()}
+    kinds = {e.kind for e in events}
+    topics = {absolute(topic): (msg_type, qos) for kind, (topic, msg_type) in EVENT_TOPICS.items()
+              if kind in kinds or kind in ("measurement", "truth", "imu")}
     if clock:
         topics[CLOCK_TOPIC] = (Clock, qos)
     if p["hand_over_prior"]:

@@ -131,6 +131,22 @@ SCENARIO_DESCRIPTIONS = {
 }
 
 
+SUITE_DESCRIPTIONS = {
+    "altimeter_period": "Altimeter period [s], a multiple of scenario.dt; 0 switches measurements/altitude off.",
+    "altimeter_noise_std": "Altimeter noise standard deviation [m].",
+    "altimeter_max_altitude": "The altimeter measures below this altitude [m].",
+    "reference_radius": "Radius of the altimeter's reference sphere [m].",
+    "trn_period": "s between two TRN image captures (measurements/position), a multiple of scenario.dt; 0: off.",
+    "trn_latency": "s from a TRN capture (the stamp) to the fix's publication.",
+    "trn_noise_std": "TRN fix noise standard deviation per axis [m] (the message's covariance).",
+    "trn_outlier_probability": "Probability that a TRN fix is an outlier [-].",
+    "trn_outlier_size": "An outlier's extra error, in trn_noise_std, in a random direction [-].",
+    "velocimeter_period": "Velocimeter period [s], a multiple of scenario.dt; 0 switches measurements/velocity off.",
+    "velocimeter_noise_std": "Velocimeter noise standard deviation per axis [m/s] (the message's covariance).",
+    "velocimeter_max_altitude": "The velocimeter measures below this altitude [m].",
+}
+
+
 def simulator_specs() -> list[Spec]:
     """The simulator's table: its own parameters plus ``scenario.<field>`` for every ScenarioConfig field."""
     from gpf_nav.scenario import ScenarioConfig
@@ -160,6 +176,12 @@ def simulator_specs() -> list[Spec]:
         elif isinstance(default, tuple):
             default = [float(v) for v in default]
         specs.append(Spec("scenario." + name, default, description))
+    from gpf_nav.sensor_suite import SuiteConfig
+    suite = SuiteConfig()
+    specs += [Spec("publish_suite", False, "Also publish the sensor suite (suite.*): measurements/altitude, measurements/position (TRN, late by suite.trn_latency) and measurements/velocity."),
+              Spec("altimeter_frame", "base_link", "frame_id of measurements/altitude.")]
+    specs += [Spec("suite." + name, float(getattr(suite, name)), description)
+              for name, description in SUITE_DESCRIPTIONS.items()]
     return specs
 
 

@@ -2,7 +2,9 @@
 
 Generates the truth with the core scenario generator (or replays a CSV truth, parameter
 ``truth_csv``) and publishes, in simulated time, ``measurements/rae``, ``imu``, ``truth/odometry`` and
-``/clock``. A wall-clock loop at ``clock_rate`` Hz advances simulated time by ``rate_factor`` times
+``/clock``; with ``publish_suite`` also the sensor suite of :mod:`gpf_nav.sensor_suite` (``suite.*``):
+``measurements/altitude``, ``measurements/velocity`` and ``measurements/position`` (TRN fixes published
+``suite.trn_latency`` s after their stamp, the image capture). A wall-clock loop at ``clock_rate`` Hz advances simulated time by ``rate_factor`` times
 the elapsed wall time, publishes ``/clock`` and releases every event of :mod:`gpf_nav.playback`
 due by then, with the event's own stamp; so message contents never depend on timing: same seed, same
 messages. By default simulated time starts at the wall-clock time (``start_time`` negative), so at
@@ -19,13 +21,13 @@ import numpy as np
 import rclpy
 import rclpy.exceptions
 import rclpy.logging
-from geometry_msgs.msg import Vector3Stamped
+from geometry_msgs.msg import PoseWithCovarianceStamped, TwistWithCovarianceStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
-from sensor_msgs.msg import Imu
+from sensor_msgs.msg import Imu, Range
 
 from gpf_nav.ros import conversions as conv
 from gpf_nav.ros import shutdown
@@ -49,7 +51,9 @@ def scenario_from_parameters(p: dict):
 
 
 EVENT_TOPICS = {"measurement": ("measurements/rae", Vector3Stamped), "truth": ("truth/odometry", Odometry),
-                "imu": ("imu", Imu)}
+                "imu": ("imu", Imu), "altitude": ("measurements/altitude", Range),
+                "velocity": ("measurements/velocity", TwistWithCovarianceStamped),
+                "position": ("measurements/position", PoseWithCovarianceStamped)}
 """Event kind of :mod:`gpf_nav.playback` -> (topic, message type); ``/clock`` besides."""
 QOS_DEPTH = 1000
 """Depth of the simulator's reliable publishers (all topics, ``/clock`` too): a subscriber stalled for
@@ -58,8 +62,54 @@ HANDOVER_TOPIC = "set_state"
 """The topic of the mission's prior (:func:`handover_message`), latched: transient local, depth 1."""
 
 
+def suite_from_parameters(scenario, p: dict):
+    """The :class:`gpf_nav.sensor_suite.SuiteData` of ``scenario`` (seed ``p["seed"]``), or None unless
+    ``publish_suite``. ValueError for invalid ``suite.*`` values."""
+    if not p["publish_suite"]:
+        return None
+    from gpf_nav.sensor_suite import SuiteConfig, generate_suite
+    config = SuiteConfig.from_dict({k[len("suite."):]: v for k, v in p.items() if k.startswith("suite.")})
+    config.check_grid(scenario.config.dt)
+    return generate_suite(scenario, config, p["seed"])
+
+
+def events_from_parameters(scenario, p: dict) -> list:
+    """The playback events of ``scenario`` (and its sensor suite) for simulator parameters ``p``."""
+    return build_events(scenario, p["imu_rate"], p["imu_noise_std"], p["truth_rate"], p["seed"],
+                        suite_from_parameters(scenario, p))
+
+
+def _covariance6(std: float) -> np.ndarray:
+    out = np.zeros((6, 6))
+    out[:3, :3] = np.eye(3) * std ** 2
+    return out.reshape(36)
+
+
 def event_message(event, stamp_ns: int, p: dict) -> tuple[str, object]:
-    """``(topic, message)`` of a playback event stamped ``stamp_ns``, with the frames of parameters ``p``."""
+    """``(topic, message)`` of a playback event going out at ``stamp_ns`` (stamped ``event.delay_ns``
+    earlier), with the frames of parameters ``p``."""
+    stamp_ns -= event.delay_ns
+    if event.kind == "altitude":
+        # the instrument's limit: twice the altitude it is switched on below
+        msg = Range(radiation_type=Range.INFRARED, min_range=0.0,
+                    max_range=2.0 * float(p["suite.altimeter_max_altitude"]), range=float(event.data[0]))
+        msg.header.stamp, msg.header.frame_id = conv.ns_to_stamp(stamp_ns), p["altimeter_frame"]
+        return "measurements/altitude", msg
+    if event.kind == "velocity":
+        msg = TwistWithCovarianceStamped()
+        msg.header.stamp, msg.header.frame_id = conv.ns_to_stamp(stamp_ns), p["world_frame"]
+        lin = msg.twist.twist.linear
+        lin.x, lin.y, lin.z = event.data
+        msg.twist.covariance = _covariance6(p["suite.velocimeter_noise_std"])
+        return "measurements/velocity", msg
+    if event.kind == "position":
+        msg = PoseWithCovarianceStamped()
+        msg.header.stamp, msg.header.frame_id = conv.ns_to_stamp(stamp_ns), p["world_frame"]
+        pos = msg.pose.pose.position
+        pos.x, pos.y, pos.z = event.data
+        msg.pose.pose.orientation.w = 1.0
+        msg.pose.covariance = _covariance6(p["suite.trn_noise_std"])
+        return "measurements/position", msg
     if event.kind == "measurement":
         return "measurements/rae", conv.vector3_stamped(event.data, stamp_ns, p["measurement_frame"])
     if event.kind == "truth":
@@ -104,7 +154,8 @@ class SimulatorNode(Node):
         finished: True once the trajectory has ended and ``loop`` is false.
         trajectory_ns: trajectory time reached by the release loop in the current lap [ns] (0 before
             the start).
-        published: messages published per kind (``measurement``, ``imu``, ``truth``, ``clock``, ``handover``).
+        published: messages published per kind (``measurement``, ``imu``, ``truth``, ``clock``, ``handover``,
+            ``altitude``, ``velocity``, ``position``).
     """
 
     def __init__(self, name: str = NODE_NAME, **kwargs):
@@ -114,18 +165,18 @@ class SimulatorNode(Node):
         if not errors:
             try:
                 self.config, self.scenario = scenario_from_parameters(p)
+                self.events = events_from_parameters(self.scenario, p)
             except (ValueError, OSError) as err:
                 errors.append(f"scenario: {err}")
         if errors:
             raise ParameterError("invalid parameters: " + "; ".join(errors))
-        self.events = build_events(self.scenario, p["imu_rate"], p["imu_noise_std"], p["truth_rate"],
-                                   p["seed"])
         self.span_ns = max(e.t_ns for e in self.events)
         self.period_ns = int(round(float(np.median(np.diff(self.scenario.times))) * NS)) \
             if len(self.scenario.times) > 1 else NS
         self.finished = False
         self.trajectory_ns = 0
-        self.published = {"measurement": 0, "imu": 0, "truth": 0, "clock": 0, "handover": 0}
+        self.published = {"measurement": 0, "imu": 0, "truth": 0, "clock": 0, "handover": 0, "altitude": 0,
+                           "velocity": 0, "position": 0}
         self._index = 0
         self._lap_offset_ns = 0
         self._handover_due = p["hand_over_prior"]
@@ -137,8 +188,9 @@ class SimulatorNode(Node):
 
         qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                          depth=QOS_DEPTH)
+        kinds = {"measurement", "truth", "imu"} | {e.kind for e in self.events}
         self._publishers_by_topic = {topic: self.create_publisher(msg_type, topic, qos)
-                                     for topic, msg_type in EVENT_TOPICS.values()}
+                                     for kind, (topic, msg_type) in EVENT_TOPICS.items() if kind in kinds}
         self.clock_pub = self.create_publisher(ClockMsg, "/clock", qos) if p["publish_clock"] else None
         latched = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=1,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)  # an estimator started later gets it
