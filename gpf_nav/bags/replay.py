@@ -4,8 +4,9 @@ The estimator node's own message handling (:class:`gpf_nav.ros.estimator_core.Es
 parameters, checks, counters and outputs) is fed the bag's messages in recording order, with no ROS
 graph and no waiting:
 
-* inputs: the node's topics ``measurements/rae``, ``measurements/range``, ``imu``, ``set_pose``,
-  ``set_state`` (the prior ``gpf-nav record`` writes at the start, as the simulator hands it over), plus
+* inputs: the node's topics (:data:`gpf_nav.ros.estimator_core.INPUT_TOPICS`: ``measurements/rae``,
+  ``measurements/range``, ``measurements/position``, ``measurements/velocity``, ``measurements/altitude``,
+  ``imu``, ``set_pose``, ``set_state``) (the prior ``gpf-nav record`` writes at the start, as the simulator hands it over), plus
   ``truth/odometry`` for the evaluation; each remappable (``--remap measurements/rae:=/tracking/rae``);
 * time: header stamps drive the filter, as in the node. The node clock (the ``future_stamp`` check,
   ``set_pose`` with a zero stamp, the ``publish_rate`` timer, diagnostics ages) is each message's
