@@ -190,6 +190,7 @@ def test_record_and_replay_carry_the_sensor_suite(tmp_path):
     for topic in ("/measurements/altitude", "/measurements/velocity", "/measurements/position"):
         assert summary["inputs"][topic]["accepted"] == counts[topic], summary["inputs"][topic]
     assert summary["rejected_by_reason"] == {}
+    assert 0 < summary["position_rmse_second_half_m"] < summary["position_rmse_m"]
 
 
 # --- replay --------------------------------------------------------------------------------------------

@@ -84,6 +84,10 @@ def summarize(core, reader, name, present, read, undecodable, truth_wrong_frame,
         summary["position_rmse_m"] = rmse(error_norms(means[:, p], ref[have][:, p]))
         summary["velocity_rmse_mps"] = rmse(error_norms(means[:, v], ref[have][:, v]))
         summary["final_position_error_m"] = float(np.linalg.norm(err[-1, p]))
+        t = stamps[have]
+        late = t >= t[0] + (t[-1] - t[0]) // 2  # the updates of the second half of the compared span
+        summary["position_rmse_second_half_m"] = rmse(error_norms(means[late][:, p], ref[have][late][:, p]))
+        summary["velocity_rmse_second_half_mps"] = rmse(error_norms(means[late][:, v], ref[have][late][:, v]))
         summary["mean_nees"] = float(np.nanmean(n)) if np.any(np.isfinite(n)) else None
         summary["nees_dof"] = len(p) + len(v)
         order = p + v
@@ -115,7 +119,9 @@ def print_summary(summary: dict) -> None:
         print(f"  vs truth ({t['topic']}, {t['compared_updates']} updates): position RMSE "
               f"{summary['position_rmse_m']:.1f} m (final {summary['final_position_error_m']:.1f} m), velocity RMSE "
               f"{summary['velocity_rmse_mps']:.3f} m/s, mean NEES {nees_text} "
-              f"({summary['nees_dof']} for a consistent filter)")
+              f"({summary['nees_dof']} for a consistent filter); second half: position RMSE "
+              f"{summary['position_rmse_second_half_m']:.1f} m, velocity RMSE "
+              f"{summary['velocity_rmse_second_half_mps']:.3f} m/s")
     else:
         print(f"  vs truth                    : no truth to compare ({t['topic']}: {t['messages']} usable messages, "
               f"{t['wrong_frame']} in another frame)")
