@@ -128,6 +128,7 @@ SCENARIO_DESCRIPTIONS = {
     "dropout_probability": "Probability a whole measurement is lost [-].",
     "thrust": "Retrograde specific force magnitude [m/s^2]; 0 = coasting.",
     "disturbance": "Constant acceleration on the truth in world_frame that the IMU does not sense, like a gravity-field error [m/s^2].",
+    "measurement_bias_sigma": "Constant error added to range, azimuth and elevation, in their noise standard deviations [-] (the estimator's range_bias_std can estimate the range one).",
 }
 
 
