@@ -105,6 +105,11 @@ ESTIMATOR = [
     Spec("monitor_warn_false_alarm_rate", 1e-2, "Monitor: per-update probability of WARN or worse on a consistent filter, in [monitor_false_alarm_rate, 1)."),
     Spec("monitor_quarantine_rate", -1.0, "Monitor: p-value below which a window is kept out of the reference; negative: monitor_false_alarm_rate / 100; 0: no quarantine."),
     Spec("monitor_hold", 5.0, "A monitor WARN or FAULT stays in /diagnostics this long after the update that raised it [s, steady clock]; negative: latched until ~/reset or a re-initialisation."),
+    # node only (gpf-nav replay accepts and ignores them): lifecycle and TF
+    Spec("autostart", True, "Configure and activate at start-up; false: wait unconfigured for a lifecycle manager (lifecycle_msgs services ~/change_state, ~/get_state)."),
+    Spec("publish_tf", True, "Publish tf_frame_id -> tf_child_frame_id on /tf with every odometry message (needs tf2_msgs)."),
+    Spec("tf_frame_id", "", "Parent frame of the published transform; '' = world_frame."),
+    Spec("tf_child_frame_id", "", "Child frame of the published transform; '' = base_frame."),
 ]
 
 SCENARIO_DESCRIPTIONS = {

@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Pose, PoseArray, Vector3Stamped
+from geometry_msgs.msg import Pose, PoseArray, TransformStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 
 UNKNOWN_ROTATION_VARIANCE = 1e6
@@ -122,6 +122,20 @@ def odometry_msg(mean: np.ndarray, cov: np.ndarray, stamp_ns: int, world_frame: 
     lin = msg.twist.twist.linear
     lin.x, lin.y, lin.z = (float(c) for c in mean[v])
     msg.twist.covariance = _cov6(cov[np.ix_(v, v)])
+    return msg
+
+
+def odometry_transform(odometry: Odometry, frame_id: str = "", child_frame_id: str = "") -> TransformStamped:
+    """``geometry_msgs/TransformStamped`` of an odometry's pose, at its stamp: ``frame_id`` (default the
+    odometry's ``header.frame_id``) to ``child_frame_id`` (default its ``child_frame_id``)."""
+    msg = TransformStamped()
+    msg.header.stamp = odometry.header.stamp
+    msg.header.frame_id = frame_id or odometry.header.frame_id
+    msg.child_frame_id = child_frame_id or odometry.child_frame_id
+    pose = odometry.pose.pose
+    t = msg.transform.translation
+    t.x, t.y, t.z = pose.position.x, pose.position.y, pose.position.z
+    msg.transform.rotation = pose.orientation
     return msg
 
 

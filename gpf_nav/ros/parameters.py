@@ -1,4 +1,5 @@
-"""Declare a parameter table of :mod:`gpf_nav.estimator.params` on an rclpy node.
+"""Declare a parameter table of :mod:`gpf_nav.estimator.params` on an rclpy node, and warn about
+the parameters a node was given but does not declare.
 
 Numbers are declared with dynamic typing, so ``1`` in a YAML file is accepted for a float; every value is
 returned coerced to its default's type (:func:`gpf_nav.estimator.params.coerce`).
@@ -28,3 +29,15 @@ def declare(node, specs: list[Spec]) -> dict:
             value = node.declare_parameter(spec.name, spec.default, descriptor).value
         values[spec.name] = coerce(spec, value)
     return values
+
+
+def warn_undeclared(node) -> list[str]:
+    """One warning line naming the parameters given to ``node`` (``--ros-args -p``, params files) that it
+    does not declare, which it therefore ignores; returns their names. Call after declaring."""
+    # rclpy keeps the overrides from the command line and params files only in this attribute
+    names = sorted(name for name in node._parameter_overrides if not node.has_parameter(name))
+    if names:
+        node.get_logger().warning(f"ignoring parameter(s) that {node.get_name()} does not declare: "
+                                  f"{', '.join(names)} (ros2 param list {node.get_fully_qualified_name()} "
+                                  "lists the declared ones; docs/ros.md)")
+    return names

@@ -32,7 +32,7 @@ from sensor_msgs.msg import Imu, Range
 from gpf_nav.ros import conversions as conv
 from gpf_nav.ros import shutdown
 from gpf_nav.estimator.params import ParameterError, simulator_specs
-from gpf_nav.ros.parameters import declare
+from gpf_nav.ros.parameters import declare, warn_undeclared
 from gpf_nav.playback import NS, build_events
 
 NODE_NAME = "lunar_simulator"
@@ -161,6 +161,7 @@ class SimulatorNode(Node):
     def __init__(self, name: str = NODE_NAME, **kwargs):
         super().__init__(name, **kwargs)
         p = self.params = declare(self, simulator_specs())
+        warn_undeclared(self)
         errors = check_simulator_parameters(p)
         if not errors:
             try:
