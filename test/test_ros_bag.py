@@ -584,3 +584,30 @@ def test_header_stamp_read_from_the_cdr_bytes():
         assert header_stamp_ns(ts.serialize_cdr(msg, VS.__msgtype__, little_endian=little)) == stamp
     with pytest.raises(ValueError):
         header_stamp_ns(b"\x00\x01\x00\x00")
+
+
+# --- loud failures -------------------------------------------------------------------------------------
+def test_replay_of_a_bag_in_another_measurement_frame_fails_naming_the_frame(tmp_path):
+    """Every measurement refused (wrong_frame): exit status 1, the counts by reason and the parameter to set."""
+    p = _sim_params(**{"scenario.duration": 60.0, "measurement_frame": "radar"})
+    counts = record(str(tmp_path / "radar"), p, "mcap")
+    r = _cli("replay", tmp_path / "radar", "--out", tmp_path / "out", "--no-progress", "--no-figure")
+    assert r.returncode == 1, (r.returncode, r.stderr)
+    n = counts["/measurements/rae"]
+    last = r.stderr.strip().splitlines()[-1]
+    assert last.startswith("gpf-nav replay: error: no measurement accepted")
+    assert f"wrong_frame {n}" in last and "'radar'" in last and "measurement_frame:=radar" in last, last
+    summary = json.loads((tmp_path / "out/summary.json").read_text())
+    assert summary["measurements"] == {"read": n, "accepted": 0, "rejected": {"wrong_frame": n},
+                                       "frames": {"radar": n}, "measurement_frame": "station"}
+    fixed = _cli("replay", tmp_path / "radar", "--out", tmp_path / "fixed", "--no-progress", "--no-figure",
+                 "-p", "measurement_frame:=radar")
+    assert fixed.returncode == 0, fixed.stderr
+    assert json.loads((tmp_path / "fixed/summary.json").read_text())["measurements"]["accepted"] == n
+
+
+def test_record_without_a_measurement_fails_naming_the_parameters(tmp_path):
+    r = _cli("record", tmp_path / "none", "--duration", "30", "-p", "scenario.dropout_probability:=1.0")
+    assert r.returncode == 1, (r.returncode, r.stderr)
+    assert "no measurement written (/measurements/rae 0)" in r.stderr
+    assert "scenario.dropout_probability (= 1.0)" in r.stderr

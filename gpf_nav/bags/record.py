@@ -17,8 +17,10 @@ as ``ros2 run gpf_nav simulator`` at ``rate_factor`` 1, only as fast as the disk
 Play it with ``ros2 bag play OUT`` and run the subscribers with ``use_sim_time:=true`` (the bag carries
 ``/clock``; do not add ``--clock``). With ``publish_clock: false``, as the simulator then does, there is
 no ``/clock`` and the stamps follow the wall clock from the start of the recording (``start_time`` is
-ignored): play it with ``ros2 bag play --clock`` if the subscribers use simulated time. Exit status 2, after one line on stderr, on invalid parameters or an
-existing ``OUT``.
+ignored): play it with ``ros2 bag play --clock`` if the subscribers use simulated time. Exit status 2, after
+one line on stderr, on invalid parameters or an existing ``OUT``; exit status 1, after one line naming the
+parameters to check, when the bag holds no measurement (all dropped, or a trajectory shorter than one
+measurement period).
 """
 from __future__ import annotations
 
@@ -30,6 +32,7 @@ from gpf_nav.bags.bag import STORAGES, BagError, BagWriter, absolute, qos_profil
 from gpf_nav.estimator.params import ParameterError, parameters_from_files, simulator_specs
 
 CLOCK_TOPIC = "/clock"
+NOTHING_WRITTEN = 1  # exit status of a recording without a measurement
 
 
 def _parser() -> CommandParser:
@@ -109,12 +112,21 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     start = time.perf_counter()
     try:
-        counts = record(args.out, simulator_parameters(args), args.storage)
+        p = simulator_parameters(args)
+        counts = record(args.out, p, args.storage)
     except (ParameterError, BagError) as err:
         print(f"gpf-nav record: error: {err}", file=sys.stderr)
         return 2
     listing = ", ".join(f"{topic} {n}" for topic, n in counts.items())
     print(f"gpf-nav record: wrote {args.out} ({args.storage}) in {time.perf_counter() - start:.1f} s: {listing}")
+    from gpf_nav.ros.simulator_node import EVENT_TOPICS
+    topic = absolute(EVENT_TOPICS["measurement"][0])
+    if not counts.get(topic):
+        print(f"gpf-nav record: error: no measurement written ({topic} 0): every one was dropped or the "
+              f"trajectory is shorter than one measurement period; see scenario.dropout_probability "
+              f"(= {p['scenario.dropout_probability']}), scenario.duration (= {p['scenario.duration']}) and "
+              f"scenario.dt (= {p['scenario.dt']})", file=sys.stderr)
+        return NOTHING_WRITTEN
     return 0
 
 

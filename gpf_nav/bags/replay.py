@@ -23,7 +23,9 @@ graph and no waiting:
 Truth is compared with the estimate of every filter update (the posterior at each measurement stamp),
 interpolated between truth samples at most 1 s apart (:mod:`gpf_nav.bags.replay_report`); truth
 messages in another frame than ``world_frame`` are not used. Exit status 2, after one line on stderr, on invalid
-parameters, an unreadable or truncated bag, a topic of the wrong type, or no measurement topic.
+parameters, an unreadable or truncated bag, a topic of the wrong type, or no measurement topic; exit status 1,
+after the summary and one line on stderr with the counts by refusal reason and the parameter to set, when the
+replay accepted no measurement (e.g. ``measurement_frame`` differs from the bag's frame).
 """
 from __future__ import annotations
 
@@ -50,6 +52,8 @@ from gpf_nav.bags.replay_report import print_summary, summarize
 TRUTH_TOPIC = "truth/odometry"
 CLOCK_TOPIC = "/clock"
 OUTPUT_DEPTH = 10  # the node's reliable publishers
+MEASUREMENT_STREAMS = ("rae", "range")
+NOTHING_ACCEPTED = 1  # exit status of a replay that ran but accepted no measurement
 
 
 REPLAY_PARAMETERS = ESTIMATOR + [Spec("use_sim_time", False, "Node clock: the bag's /clock (true) or each "
@@ -177,7 +181,7 @@ def _run(reader, out_bag, params, name, present, storage, particles, progress) -
     clock = {"rec": reader.start_ns, "node": 0 if sim_time else reader.start_ns, "update": False}
     updates: list[tuple[int, np.ndarray, np.ndarray]] = []
     truth_raw: dict[int, bytes] = {}
-    read, undecodable = Counter(), Counter()
+    read, undecodable, frames = Counter(), Counter(), Counter()
     last_diag = {"level": None, "message": "none published"}
 
     with BagWriter(out_bag, storage, {name[t]: (m, qos) for t, m in wanted_outputs.items()}) as writer:
@@ -242,7 +246,9 @@ def _run(reader, out_bag, params, name, present, storage, particles, progress) -
                     if publish_period and clock["node"]:
                         publish_timer.step(clock["node"])
                 else:
-                    clock["update"] = stream in ("rae", "range")
+                    clock["update"] = stream in MEASUREMENT_STREAMS
+                    if clock["update"]:
+                        frames[msg.header.frame_id] += 1
                     core.handle(stream, msg, clock["node"])
                     clock["update"] = False
             if bar is not None:
@@ -255,8 +261,47 @@ def _run(reader, out_bag, params, name, present, storage, particles, progress) -
     truth, truth_wrong_frame = _decode_truth(truth_raw, [u[0] for u in updates], params["world_frame"],
                                              undecodable, name[TRUTH_TOPIC])
     wall, cpu = time.perf_counter() - wall_start, time.process_time() - cpu_start
-    return summarize(core, reader, name, present, read, undecodable, truth_wrong_frame, updates, truth,
-                     len(truth_raw), writer, storage, wall, cpu, last_diag, log)
+    summary, evaluation = summarize(core, reader, name, present, read, undecodable, truth_wrong_frame, updates,
+                                    truth, len(truth_raw), writer, storage, wall, cpu, last_diag, log)
+    c = core.engine.counters
+    rejected = Counter()
+    for (stream, reason), n in c.rejected_by_stream.items():
+        if stream in MEASUREMENT_STREAMS and n:
+            rejected[reason] += n
+    summary["measurements"] = {
+        "read": sum(frames.values()), "accepted": sum(c.accepted[s] for s in MEASUREMENT_STREAMS),
+        "rejected": dict(rejected), "frames": dict(frames), "measurement_frame": params["measurement_frame"]}
+    return summary, evaluation
+
+
+PARAMETER_FOR = {
+    "wrong_frame": "measurement_frame",
+    "future_stamp": "max_future, or use_sim_time:=true for a bag with /clock",
+    "rate_limit": "max_measurement_rate (0: unlimited)",
+    "range_out_of_limits": "nothing: the Range messages' own min_range/max_range refuse them",
+}
+"""Refusal reason -> the estimator parameter that decides it (the hint of :func:`nothing_accepted`)."""
+
+
+def nothing_accepted(summary: dict) -> str:
+    """'' when the replay accepted a measurement; otherwise why not: counts by reason and the parameter
+    to set (naming the frames the bag's measurements are in when the frame was the problem)."""
+    m = summary["measurements"]
+    if m["accepted"]:
+        return ""
+    if not m["read"]:
+        return "no measurement accepted: the measurement topics hold no decodable message"
+    reasons = ", ".join(f"{r} {n}" for r, n in sorted(m["rejected"].items(), key=lambda rn: -rn[1]))
+    text = f"no measurement accepted: {m['read']} read, refused by reason: {reasons or 'none'}"
+    for reason in sorted(m["rejected"], key=lambda r: -m["rejected"][r]):
+        if reason == "wrong_frame":
+            seen = ", ".join(f"'{f}' ({n})" for f, n in sorted(m["frames"].items(), key=lambda fn: -fn[1]))
+            best = max(m["frames"], key=m["frames"].get)
+            text += (f". wrong_frame: the measurements' header.frame_id is {seen}, measurement_frame is "
+                     f"'{m['measurement_frame']}': set -p measurement_frame:={best} (or '' for any frame)")
+        elif reason in PARAMETER_FOR:
+            text += f". {reason}: see the parameter {PARAMETER_FOR[reason]}"
+    return text
 
 
 def _decode_truth(raw: dict[int, bytes], stamps, world_frame: str, undecodable: Counter,
@@ -328,6 +373,10 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(summary, indent=2))
     else:
         print_summary(summary)
+    problem = nothing_accepted(summary)
+    if problem:
+        print(f"gpf-nav replay: error: {problem}", file=sys.stderr)
+        return NOTHING_ACCEPTED
     return 0
 
 
