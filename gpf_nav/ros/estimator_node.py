@@ -76,6 +76,7 @@ class EstimatorNode(LifecycleNode):
         self.core: EstimatorCore | None = None
         self.engine = None
         self.active = False
+        self.finalized = False                  # after the shutdown transition: main() then exits 0
         self.ignored: Counter[str] = Counter()  # messages received while configured but inactive
         self._entities: list = []               # (destroy, entity): subscriptions, timers, service of configure
         self._publishers_by_topic: dict = {}
@@ -130,6 +131,8 @@ class EstimatorNode(LifecycleNode):
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
         self.active = False
         self._release()
+        self.finalized = True
+        self.get_logger().info("shut down (finalized)")
         return super().on_shutdown(state)
 
     def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -257,7 +260,8 @@ def _counts(counter: Counter) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Console script ``estimator``: returns 2 (after a FATAL log line) on invalid parameters at
-    start-up, 0 when stopped by SIGINT or SIGTERM (:mod:`gpf_nav.ros.shutdown`)."""
+    start-up, 0 when stopped by SIGINT or SIGTERM (:mod:`gpf_nav.ros.shutdown`) or by the lifecycle
+    shutdown transition."""
     retain_freed_memory()
     limit_blas_threads()
     stop = shutdown.init_without_signal_handlers(sys.argv if argv is None else argv)
@@ -269,7 +273,7 @@ def main(argv: list[str] | None = None) -> int:
         rclpy.try_shutdown()
         return 2
     try:
-        shutdown.spin_until(node, stop)
+        shutdown.spin_until(node, stop, done=lambda: node.finalized)
     finally:
         shutdown.close(node)
     return 0
