@@ -113,3 +113,27 @@ def test_a_sensor_measurement_does_not_initialise_from_data():
     assert engine.measurement(T0, suite.velocity[1], None, "velocity", sensors["velocity"]) == \
         (False, "not_initialized")
     assert not engine.initialized
+
+
+class _Uncopyable:
+    """A filter wrapper that cannot be deep-copied."""
+
+    def __init__(self, inner):
+        self.__dict__["inner"] = inner
+
+    def __getattr__(self, name):
+        return getattr(self.__dict__["inner"], name)
+
+    def __deepcopy__(self, memo):
+        raise TypeError("not copyable")
+
+
+def test_a_filter_that_cannot_be_copied_runs_without_late_fusion():
+    scenario, suite, sensors, engine = _setup("ekf")
+    model = engine.model
+    engine.factory = lambda: _Uncopyable(make_filter("ekf", model))
+    engine.reset()
+    events = [e for e in _events(scenario, suite) if e[1] == "rae"][:6]
+    _run(engine, sensors, events)
+    assert engine.snapshot_failures == 6 and len(engine.history) == 0
+    assert engine.measurement(events[3][0], events[3][2], None) == (False, "older_than_history")

@@ -162,6 +162,7 @@ class EstimatorEngine:
         self._streaks: dict[str, int] = {}   # gate refusals in a row per stream
         self.late_count = 0                   # late measurements fused at their stamp
         self.replayed_count = 0               # inputs re-applied after them
+        self.snapshot_failures = 0            # filter copies that failed (the history was emptied)
         self._init_buffer: list[tuple[int, np.ndarray]] = []
         self.init_failures = 0                # batch fits that did not determine the state
         self._shadow = None
@@ -278,7 +279,7 @@ class EstimatorEngine:
                 feed_monitor: bool = True) -> str:
         """Predict to ``stamp_ns`` and update with ``y``: ``""`` when updated, ``"innovation_gate"`` when
         the gate refused it (predicted only), ``"filter_error"`` after a recovery."""
-        before = copy.deepcopy(self.filter) if self.history.length_ns > 0 else None
+        before = self._snapshot()
         entry = Entry(stamp_ns, stream, y, sensor, before, self.t_ns, dict(self._streaks))
         try:
             self._predict_to(stamp_ns)
@@ -304,6 +305,18 @@ class EstimatorEngine:
             self._prev_y = y
         self.last_update_ns = stamp_ns
         return ""
+
+    def _snapshot(self):
+        """A deep copy of the filter for the history (None without a history). A filter that cannot be
+        copied empties the history: late stamps before this input are then ``older_than_history``."""
+        if self.history.length_ns <= 0:
+            return None
+        try:
+            return copy.deepcopy(self.filter)
+        except Exception:  # noqa: BLE001 - e.g. a user's filter wrapper: go on without late fusion
+            self.history.clear()
+            self.snapshot_failures += 1
+            return None
 
     def _gated(self, stream: str, sensor, y: np.ndarray) -> bool:
         """The innovation gate of ``stream`` (a sensor object's streams only) on the predicted estimate;
