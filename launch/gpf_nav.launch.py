@@ -5,6 +5,7 @@
     ros2 launch gpf_nav gpf_nav.launch.py params_file:=/path/my_estimator.yaml namespace:=lander log_level:=debug
     ros2 launch gpf_nav gpf_nav.launch.py autostart:=false     # the estimator waits for a lifecycle manager
     ros2 launch gpf_nav gpf_nav.launch.py shutdown_on_simulator_exit:=true   # end with the trajectory
+    ros2 launch gpf_nav gpf_nav.launch.py publish_suite:=true  # + altimeter, TRN fixes, velocimeter
     ros2 topic echo /odometry/filtered
 
 Ctrl-C stops both nodes cleanly (exit 0). Without launch_ros, ``gpf-nav demo`` runs the same pair in
@@ -30,7 +31,8 @@ def generate_launch_description():
     simulator = Node(package="gpf_nav", executable="simulator", name="lunar_simulator", output="screen",
                      namespace=namespace, ros_arguments=["--log-level", log_level],
                      parameters=[os.path.join(config, "simulator.yaml"),
-                                 {"rate_factor": LaunchConfiguration("rate_factor"), "publish_clock": True}])
+                                 {"rate_factor": LaunchConfiguration("rate_factor"), "publish_clock": True,
+                                  "publish_suite": ParameterValue(LaunchConfiguration("publish_suite"), value_type=bool)}])
     estimator = Node(package="gpf_nav", executable="estimator", name="gpf_estimator", output="screen",
                      namespace=namespace, ros_arguments=["--log-level", log_level],
                      parameters=[LaunchConfiguration("params_file"),
@@ -53,6 +55,9 @@ def generate_launch_description():
         DeclareLaunchArgument("filter", default_value="gpf", description=" | ".join(FILTERS)),
         DeclareLaunchArgument("rate_factor", default_value="1.0",
                               description="Simulated seconds per wall second."),
+        DeclareLaunchArgument("publish_suite", default_value="false",
+                              description="true: the simulator also publishes measurements/altitude, "
+                                          "measurements/position (TRN, 4 s late) and measurements/velocity."),
         DeclareLaunchArgument("shutdown_on_simulator_exit", default_value="false",
                               description="true: end the launch (and the estimator) when the simulator "
                                           "exits at the end of its trajectory; false: the estimator stays up."),
