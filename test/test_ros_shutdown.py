@@ -92,7 +92,7 @@ def test_simulator_exits_0_by_itself_at_the_end_of_the_trajectory(tmp_path):
 
 
 LAUNCH_ARGUMENTS = {"params_file", "namespace", "use_sim_time", "log_level", "autostart", "filter", "rate_factor",
-                    "shutdown_on_simulator_exit"}
+                    "shutdown_on_simulator_exit", "publish_suite"}
 
 
 def test_launch_file_declares_its_arguments_statically():
