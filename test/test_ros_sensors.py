@@ -5,7 +5,11 @@ on every new topic refused, counted, its reason in /diagnostics, never a NaN out
 import math
 import os
 import random
+import signal
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -28,6 +32,7 @@ from gpf_nav.sensor_suite import SuiteConfig, generate_suite  # noqa: E402
 from test_estimator_sensors import BAD, altitude_msg, position_msg, velocity_msg  # noqa: E402
 
 S = 1_000_000_000
+ROOT = Path(__file__).resolve().parents[1]
 _DOMAINS = iter(random.Random(os.getpid() ^ time.time_ns() ^ 0x18B).sample(range(110, 230), 20))
 NEW = ("position", "velocity", "altitude")
 
@@ -37,8 +42,9 @@ class Ros:
 
     def __init__(self):
         os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+        self.domain = next(_DOMAINS)
         self.context = rclpy.Context()
-        rclpy.init(args=[], context=self.context, domain_id=next(_DOMAINS))
+        rclpy.init(args=[], context=self.context, domain_id=self.domain)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.nodes = []
         self.node = self.add(rclpy.create_node("gpf_sensor_probe", context=self.context))
@@ -211,3 +217,51 @@ def test_bad_input_on_every_new_topic_over_dds(ros):
                     assert math.isfinite(float(kv.value)), (kv.key, kv.value)
                 except ValueError:
                     continue
+
+
+def _process(ros, module: str, log: Path, *ros_args: str) -> subprocess.Popen:
+    env = dict(os.environ, ROS_DOMAIN_ID=str(ros.domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
+    with open(log, "w") as out:
+        return subprocess.Popen([sys.executable, "-m", module, "--ros-args", *ros_args], env=env, cwd=ROOT,
+                                stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
+
+
+def test_simulator_and_estimator_processes_exchange_every_sensor(ros, tmp_path):
+    """The two console-script nodes as separate processes: every sensor the simulator sends is fused."""
+    from gpf_nav.estimator.params import parameters_from_files, simulator_specs
+    from gpf_nav.ros.simulator_node import events_from_parameters, scenario_from_parameters
+    sim_args = ["-p", "rate_factor:=20.0", "-p", "scenario.duration:=160.0", "-p", "start_time:=1000.0",
+                "-p", "start_delay:=3.0", "-p", "truth_rate:=0.0", "-p", "publish_suite:=true",
+                "-p", "suite.trn_outlier_probability:=0.0", "-p", "suite.altimeter_max_altitude:=1000000.0",
+                "-p", "suite.velocimeter_max_altitude:=1000000.0"]
+    p = parameters_from_files(simulator_specs(), "lunar_simulator", [ROOT / "config/simulator.yaml"],
+                              sim_args[1::2])
+    events = events_from_parameters(scenario_from_parameters(p)[1], p)
+    expected = {s: sum(e.kind == k for e in events) for s, k in
+                (("rae", "measurement"), ("position", "position"), ("velocity", "velocity"), ("altitude", "altitude"))}
+    diagnostics = ros.record(DiagnosticArray, "/diagnostics")
+    est = _process(ros, "gpf_nav.ros.estimator_node", tmp_path / "estimator.log", "-p", "use_sim_time:=true",
+                   "-p", "n_particles:=300", "-p", "queue_depth:=500", "-p", "diagnostics_period:=0.5")
+    try:
+        assert ros.spin_until(lambda: _status(diagnostics) is not None, 60.0), (tmp_path / "estimator.log").read_text()
+        sim = _process(ros, "gpf_nav.ros.simulator_node", tmp_path / "simulator.log", *sim_args)
+        assert ros.spin_until(lambda: sim.poll() is not None, 300.0), "the simulator did not finish"
+        assert sim.returncode == 0, (tmp_path / "simulator.log").read_text()
+
+        def all_fused():
+            values = _status(diagnostics) or {}
+            return all(values.get(f"accepted {s}") == str(n) for s, n in expected.items())
+
+        assert ros.spin_until(all_fused, 60.0), (_status(diagnostics), expected)
+        values = _status(diagnostics)
+        assert all(values[f"rejected {s}"] == "0" for s in expected), values
+        assert all(n > 5 for n in expected.values()) and int(values["late measurements fused"]) >= \
+            expected["position"] - 1
+    finally:
+        est.send_signal(signal.SIGINT)
+        try:
+            est.wait(30)
+        except subprocess.TimeoutExpired:
+            est.kill()
+    assert est.returncode == 0, (tmp_path / "estimator.log").read_text()
