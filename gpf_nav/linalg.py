@@ -64,3 +64,27 @@ def solve_spd(S: np.ndarray, b: np.ndarray) -> np.ndarray:
                          B * x0 + (a * f - c * c) * x1 + (bb * c - a * e) * x2,
                          C * x0 + (bb * c - a * e) * x1 + (a * d - bb * bb) * x2])
     return np.linalg.solve(S.transpose(2, 0, 1), b.T[..., None])[..., 0].T
+
+
+COVARIANCE_FLOOR_RELATIVE = 1e-10
+"""Smallest eigenvalue of a published covariance, relative to its largest (see :func:`positive_definite`)."""
+COVARIANCE_FLOOR_ABSOLUTE = 1e-12
+"""Smallest eigenvalue of a published covariance in the state's own units squared (a collapsed cloud)."""
+
+
+def positive_definite(cov: np.ndarray) -> np.ndarray:
+    """The symmetric part of ``cov`` ``(n, n)``, made positive definite when it is not.
+
+    A matrix whose Cholesky factorisation succeeds is returned as it is (symmetrised). Otherwise (a
+    degenerate particle cloud, rounding in a product) its eigenvalues are raised to the floor
+    ``max(COVARIANCE_FLOOR_RELATIVE * largest |eigenvalue|, COVARIANCE_FLOOR_ABSOLUTE)``, so that every
+    published covariance can be inverted. A non-finite matrix is returned unchanged (symmetrised): the
+    caller's non-finite checks handle it.
+    """
+    cov = 0.5 * (cov + cov.T)
+    if not np.isfinite(cov).all() or cholesky_or_none(cov, symmetric=True) is not None:
+        return cov
+    vals, vecs = np.linalg.eigh(cov)
+    floor = max(COVARIANCE_FLOOR_RELATIVE * float(np.abs(vals).max()), COVARIANCE_FLOOR_ABSOLUTE)
+    floored = (vecs * np.maximum(vals, floor)) @ vecs.T
+    return 0.5 * (floored + floored.T)

@@ -16,6 +16,7 @@ import numpy as np
 from gpf_nav.filters.gating import OUTLIER_GATE_LIMIT
 from gpf_nav.filters.kalman import ExtendedKF
 from gpf_nav.filters.model_averaging import NOMINAL_PRIOR, mixture_moments, model_average
+from gpf_nav.linalg import positive_definite
 from gpf_nav.models.base import StateSpaceModel
 from gpf_nav.models.compensation import ModelErrorCompensation
 from gpf_nav.models.validation import validate_model
@@ -84,7 +85,7 @@ class ModelErrorCompensated:
             if probability > 0.0:  # the nominal model's acceleration is zero
                 a, A = mixture_moments((probability, 1.0 - probability),
                                        [(np.zeros_like(a), np.zeros_like(A)), (a, A)])
-            average = (probability, m, P, *self.model.world_acceleration(m, a, A))
+            average = (probability, m, positive_definite(P), *self.model.world_acceleration(m, a, A))
         self._average_cache = (np.array(mean), np.array(cov), average)
         return average
 

@@ -5,7 +5,7 @@ import numpy as np
 
 from gpf_nav.filters.base import Filter
 from gpf_nav.filters.kalman import ModelNoise, innovation_solve, readonly_view
-from gpf_nav.linalg import psd_sqrt
+from gpf_nav.linalg import positive_definite, psd_sqrt
 from gpf_nav.models.base import StateSpaceModel
 
 
@@ -103,7 +103,8 @@ class EnsembleKF(Filter):
 
     @property
     def covariance(self) -> np.ndarray:
-        """Unbiased ensemble covariance ``(n, n)``."""
+        """Unbiased ensemble covariance ``(n, n)``, positive definite (a degenerate ensemble gets the floor
+        of :func:`~gpf_nav.linalg.positive_definite`)."""
         A = self._X - np.einsum("n,ni->i", self._weights, self._X)
         P = (A.T @ A) / (self.n_particles - 1)
-        return readonly_view(0.5 * (P + P.T))
+        return readonly_view(positive_definite(P))

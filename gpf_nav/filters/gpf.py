@@ -53,6 +53,9 @@ ILL_CONDITIONED = 1e12
 """Cloud metric: ``trace(S) / eps`` beyond which the projection is skipped (the update only weights)."""
 DEFAULT_REGULARIZATION = {"cloud": 1.0, "euclidean": 1e-6, "process_noise": 1e-6}
 """Tikhonov ``eps`` of each metric when none is given (1: the measurement noise itself, for ``cloud``)."""
+TEMPERING_ESS = 0.1
+"""Cloud metric: default ``tempering_ess`` (:class:`~gpf_nav.filters.particle.ParticleFilter`): an update
+that would leave fewer than this fraction of effective particles is tempered."""
 
 
 class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilter):
@@ -92,6 +95,10 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         moment_matching: cloud metric: give the weighted cloud the exact mean and covariance of the
             mixture of proposals after each update (and back after a resampling); False leaves the
             sampled moments (for comparison: docs/filters.md).
+        tempering_ess: cloud metric: likelihood tempering below this ESS/N
+            (:meth:`ParticleFilter.update`; the kernel of the cloud metric moves the particles between
+            stages); default :data:`TEMPERING_ESS`, 0 turns it off. The other metrics have no move
+            between stages and take 0 only.
         resampling: resampling scheme name.
         ess_threshold: tau in (0, 1].
         seed: seed of the filter's random generator.
@@ -107,7 +114,7 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
                  outlier_gate_limit: int = OUTLIER_GATE_LIMIT, moment_matching: bool = True,
                  resampling: str = "systematic",
                  ess_threshold: float = 0.5, seed: int | np.random.Generator | None = None,
-                 collapse_steps: int = 0):
+                 collapse_steps: int = 0, tempering_ess: float | None = None):
         if reference not in REFERENCES:
             raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r}")
         if weighting not in WEIGHTINGS:
@@ -120,10 +127,15 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
             regularization = DEFAULT_REGULARIZATION[metric]
         if not float(regularization) > 0.0:
             raise ValueError(f"regularization must be positive, got {regularization}")
+        if tempering_ess is None:
+            tempering_ess = TEMPERING_ESS if metric == "cloud" else 0.0
+        elif tempering_ess and metric != "cloud":
+            raise ValueError(f"tempering_ess needs metric 'cloud' (its kernel moves the particles between "
+                             f"stages), got {tempering_ess} with metric {metric!r}")
         if kernel_bandwidth is not None and not 0.0 < float(kernel_bandwidth) < 1.0:
             raise ValueError(f"kernel_bandwidth must lie in (0, 1), got {kernel_bandwidth}")
         model = self._compensate(model, unmodelled_acceleration_std, unmodelled_acceleration_time, nominal_prior)
-        super().__init__(model, n_particles, resampling, ess_threshold, seed, collapse_steps)
+        super().__init__(model, n_particles, resampling, ess_threshold, seed, collapse_steps, tempering_ess)
         self.reference = reference
         self.weighting = weighting
         self.metric = metric
@@ -182,7 +194,8 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         white_r = L_inv @ wr  # (k, N)
         # S^-1 W r / dt, outliers included (the division folded into the small factor)
         costate = (((L_inv.T / dt if dt > 0.0 else L_inv.T) @ white_r).T, rows, 1.0)
-        used = self._gate(wr @ self._weights, S, rows, sensor.name)
+        # the gate judges the whole measurement against the prediction: the first draw only
+        used = self._gate(wr @ self._weights, S, rows, sensor.name) if self._first_draw else rows
         if not used.any():  # every component refused: a prediction
             x, correction, _ = ParticleFilter._sample(self, x_pred, y, used, dt)
             self._set_costate(*costate)

@@ -12,7 +12,7 @@ from scipy.linalg.lapack import dposv, dpotrf
 
 from gpf_nav.filters.base import Filter
 from gpf_nav.filters.gating import OUTLIER_GATE_LIMIT, InnovationGated
-from gpf_nav.linalg import psd_sqrt
+from gpf_nav.linalg import positive_definite, psd_sqrt
 from gpf_nav.models.base import StateSpaceModel
 
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -139,7 +139,8 @@ class _GaussianFilter(Filter):
 
     @property
     def covariance(self) -> np.ndarray:
-        return readonly_view(self._P)
+        """Covariance ``(n, n)``, positive definite (:func:`~gpf_nav.linalg.positive_definite`)."""
+        return readonly_view(positive_definite(self._P))
 
 
 

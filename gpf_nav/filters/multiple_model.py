@@ -34,6 +34,7 @@ import numpy as np
 
 from gpf_nav.filters.gpf import GeometricProjectionPF
 from gpf_nav.filters.model_averaging import mixture_moments
+from gpf_nav.linalg import positive_definite
 from gpf_nav.models.base import StateSpaceModel
 
 SWITCH_TIME = 2.0e5
@@ -149,7 +150,8 @@ class MultipleModelGPF:
 
     @property
     def covariance(self) -> np.ndarray:
-        return mixture_moments(self.model_probabilities, self._estimates())[1]
+        """Covariance ``(n, n)`` of the mixture of the members' estimates, positive definite."""
+        return positive_definite(mixture_moments(self.model_probabilities, self._estimates())[1])
 
     def _estimates(self) -> list[tuple[np.ndarray, np.ndarray]]:
         return [(m.mean, m.covariance) for m in self.members]

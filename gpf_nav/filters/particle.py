@@ -20,13 +20,15 @@ includes the pending ``Q``.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from gpf_nav import resampling as resamplers
 from gpf_nav.filters.base import Filter
 from gpf_nav.filters.kernel import match_moments
 from gpf_nav.filters.projection import project
-from gpf_nav.linalg import cholesky_or_none, psd_sqrt
+from gpf_nav.linalg import cholesky_or_none, positive_definite, psd_sqrt
 from gpf_nav.models.base import StateSpaceModel
 from gpf_nav.sensors.base import Sensor
 
@@ -35,6 +37,11 @@ STATE_LIMIT = 1e150
 """Particles with a component sum beyond this magnitude are treated as non-finite."""
 _REMEMBER_EVERY = 10
 """Updates between two snapshots of the last good estimate (a weighted covariance costs O(N n^2))."""
+TEMPERING_FACTOR = 4.0
+"""Tempering: a refused draw retries with this many times less of the likelihood; after an accepted
+stage the next takes up to this many times more."""
+TEMPERING_DRAWS = 32
+"""Tempering: most draws of one update (the last is accepted whatever its ESS)."""
 
 
 class ParticleFilter(Filter):
@@ -48,12 +55,25 @@ class ParticleFilter(Filter):
         seed: seed of the filter's random generator.
         collapse_steps: re-initialise (see :meth:`Filter._recover`) after this many consecutive
             updates with an ESS below 1.5 particles; 0 (default) never does.
+        tempering_ess: likelihood tempering (progressive correction): a draw whose ESS/N would fall
+            below this is refused, and the update is split into stages, each weighting by a fraction of
+            the log-likelihood, ``p(y | x)^f``, with a resampling and a new proposal from the cloud
+            between them (:meth:`update`); 0 (default) updates in one stage.
+
+    Attributes:
+        tempering_stages: stages of the last update (1 when it was not split).
     """
 
     def __init__(self, model: StateSpaceModel, n_particles: int = 500, resampling: str = "systematic",
                  ess_threshold: float = 0.5, seed: int | np.random.Generator | None = None,
-                 collapse_steps: int = 0):
+                 collapse_steps: int = 0, tempering_ess: float = 0.0):
         super().__init__(model, seed)
+        if not 0.0 <= float(tempering_ess) < 1.0:
+            raise ValueError(f"tempering_ess must lie in [0, 1), got {tempering_ess}")
+        self.tempering_ess = float(tempering_ess)
+        self.tempering_stages = 1
+        self._fraction = 1.0
+        self._first_draw = True
         if int(collapse_steps) < 0:
             raise ValueError(f"collapse_steps must be non-negative, got {collapse_steps}")
         self.collapse_steps = int(collapse_steps)
@@ -115,11 +135,13 @@ class ParticleFilter(Filter):
 
     @property
     def covariance(self):
+        """Weighted covariance ``(n, n)`` of the cloud (plus the pending ``Q``), positive definite: a
+        degenerate cloud gets the floor of :func:`~gpf_nav.linalg.positive_definite`."""
         d = self._x - (self._x @ self._weights)[:, None]
         cov = (d * self._weights) @ d.T
         if self._pending_dt > 0.0:
             cov = cov + self.model.process_noise(self._pending_dt, self._pending_t)
-        return 0.5 * (cov + cov.T)
+        return positive_definite(cov)
 
     def set_moments(self, mean: np.ndarray, cov: np.ndarray) -> None:
         """Move the cloud by an affine map so that its weighted mean and covariance are ``mean`` ``(n,)``
@@ -182,20 +204,51 @@ class ParticleFilter(Filter):
         self._discard_non_finite()
 
     def update(self, y, sensor=None):
+        """Weight (and move, for a proposal that does) the cloud by ``y`` of ``sensor``.
+
+        With ``tempering_ess`` > 0 the likelihood is brought in by stages: a draw weighted by
+        ``p(y | x)^f`` whose ESS/N would fall below ``tempering_ess`` is refused and drawn again with
+        ``f / TEMPERING_FACTOR``; an accepted stage is weighted (and resampled below ``tau N``), and the
+        next, drawn from the new cloud with no process noise, takes up to ``TEMPERING_FACTOR`` times
+        more, until the fractions sum to 1. The innovation gate and the co-state are those of the first
+        draw (the whole likelihood, from the predicted cloud); :attr:`log_likelihood` is the sum of the
+        stages' evidences."""
         self._require_initialized()
         sensor = self._use(sensor)
         y, rows = self._check_measurement(y, sensor)
-        x, log_correction, rows = self._sample(self._x, y, rows, self._pending_dt)
-        self._x = x
-        self._pending_dt = 0.0
-        increment = log_correction
-        if rows.any():
-            increment = increment + self._log_likelihood(x, y, rows)
-        if not self._discard_non_finite():
-            return
-        if not self._reweight(increment):
-            self._recover("every particle weight is zero or NaN")
-            return
+        remaining, fraction, evidence = 1.0, 1.0, 0.0
+        self._first_draw, draws, self.tempering_stages = True, 0, 0
+        while True:
+            self._fraction = fraction
+            x, log_correction, rows = self._sample(self._x, y, rows, self._pending_dt)
+            self._first_draw = False
+            draws += 1
+            increment = log_correction
+            if rows.any():
+                increment = increment + self._log_likelihood(x, y, rows)
+            if (self.tempering_ess and draws < TEMPERING_DRAWS and rows.any()
+                    and _ess(self._logw + increment) < self.tempering_ess):
+                fraction /= TEMPERING_FACTOR  # refused: the particles stay the prediction
+                continue
+            self._x = x
+            self._pending_dt = 0.0
+            self.tempering_stages += 1
+            if not self._discard_non_finite():
+                self._fraction = 1.0
+                return
+            if not self._reweight(increment):
+                self._fraction = 1.0
+                self._recover("every particle weight is zero or NaN")
+                return
+            evidence += self.log_likelihood
+            remaining -= fraction
+            if remaining <= 0.0 or not rows.any():
+                break
+            fraction = min(remaining, TEMPERING_FACTOR * fraction)
+            if fraction < remaining and remaining - fraction < 1e-12:
+                fraction = remaining
+        self._fraction = 1.0
+        self.log_likelihood = evidence
         self._after_update(y, rows)
         self._check_collapse()
         self._updates += 1
@@ -308,7 +361,10 @@ class ParticleFilter(Filter):
     def _set_costate(self, a: np.ndarray | None, rows: np.ndarray, dt: float) -> None:
         """Keep the co-state ``a / dt`` of the measured ``rows`` (``a`` ``(N, k)``), zero for the other
         components; ``a = None`` clears it (no new array when it is already clear). The co-state is kept
-        for the model's own measurement only (the integrity monitor tests it); another sensor clears it."""
+        for the model's own measurement only (the integrity monitor tests it); another sensor clears it.
+        Only the first draw of an update sets it (a tempered update's later stages do not)."""
+        if not self._first_draw:  # a later tempering draw: the first draw's co-state stands
+            return
         m = self.model.measurement_dim
         if a is None or self._sensor is not self._own_sensor:
             if self._costate_rows.any():
@@ -338,6 +394,16 @@ class ParticleFilter(Filter):
         return self._whitening(rows)[0]
 
     def _whitening(self, rows: np.ndarray) -> tuple[np.ndarray, float]:
+        """``(W, log of the Gaussian normalising constant)`` of the measured rows for the likelihood of
+        this tempering stage, ``p(y | x)^f``: ``sqrt(f) W`` and ``f`` times the constant (the whitening
+        of the noise ``R / f``, normalised as the power of the density)."""
+        w, constant = self._whitening_of(rows)
+        f = self._fraction
+        if f == 1.0:
+            return w, constant
+        return math.sqrt(f) * w, f * constant
+
+    def _whitening_of(self, rows: np.ndarray) -> tuple[np.ndarray, float]:
         """``(W, log of the Gaussian normalising constant)`` of the measured rows, cached per mask."""
         key = rows.tobytes()
         if key not in self._whiteners:
@@ -417,6 +483,16 @@ class BootstrapPF(ParticleFilter):
                         orthogonal_rows=self._sensor.orthogonal_jacobian_rows)[1]
         self._set_costate(a, rows, dt)
         return None, 0.0
+
+
+def _ess(logw: np.ndarray) -> float:
+    """ESS / N of the unnormalised log-weights ``(N,)`` (NaN counts as zero weight; 0 when all are)."""
+    logw = np.where(np.isnan(logw), -np.inf, logw)
+    peak = logw.max()
+    if not -np.inf < peak < np.inf:
+        return 0.0
+    w = np.exp(logw - peak)
+    return float(w.sum() ** 2 / np.einsum("n,n->", w, w) / logw.size)
 
 
 def select_rows(H: np.ndarray, rows: np.ndarray) -> np.ndarray:
