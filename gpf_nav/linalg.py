@@ -73,18 +73,20 @@ COVARIANCE_FLOOR_ABSOLUTE = 1e-12
 
 
 def positive_definite(cov: np.ndarray) -> np.ndarray:
-    """The symmetric part of ``cov`` ``(n, n)``, made positive definite when it is not.
+    """The symmetric part of ``cov`` ``(n, n)``, its eigenvalues raised to a floor where they are below.
 
-    A matrix whose Cholesky factorisation succeeds is returned as it is (symmetrised). Otherwise (a
-    degenerate particle cloud, rounding in a product) its eigenvalues are raised to the floor
-    ``max(COVARIANCE_FLOOR_RELATIVE * largest |eigenvalue|, COVARIANCE_FLOOR_ABSOLUTE)``, so that every
-    published covariance can be inverted. A non-finite matrix is returned unchanged (symmetrised): the
-    caller's non-finite checks handle it.
+    The floor is ``max(COVARIANCE_FLOOR_RELATIVE * largest |eigenvalue|, COVARIANCE_FLOOR_ABSOLUTE)``: a
+    degenerate particle cloud, a collapsed weight or rounding in a product gives a covariance whose
+    condition number is at most 1e10, which every consumer can factor and invert. A matrix with every
+    eigenvalue at or above the floor is returned as it is (symmetrised); a non-finite one unchanged
+    (symmetrised), for the caller's non-finite checks.
     """
     cov = 0.5 * (cov + cov.T)
-    if not np.isfinite(cov).all() or cholesky_or_none(cov, symmetric=True) is not None:
+    if not np.isfinite(cov).all():
         return cov
     vals, vecs = np.linalg.eigh(cov)
     floor = max(COVARIANCE_FLOOR_RELATIVE * float(np.abs(vals).max()), COVARIANCE_FLOOR_ABSOLUTE)
+    if vals[0] >= floor:
+        return cov
     floored = (vecs * np.maximum(vals, floor)) @ vecs.T
     return 0.5 * (floored + floored.T)

@@ -13,7 +13,7 @@ def test_bench_reports_every_filter_and_the_ratio_of_the_same_run(capsys):
     assert cli.main(["bench", "--json", "--particles", "200", "--repeats", "1"]) == 0
     report = json.loads(capsys.readouterr().out)
     names = [(r["filter"], r["particles"]) for r in report["results"]]
-    assert names == [("GPF", 200), ("GPF-paper", 200), ("GPF-mm", 200), ("SPF", 200), ("EKF", None), ("UKF", None),
+    assert names == [("GPF", 200), ("GPF-paper", 200), ("GPF-single", 200), ("SPF", 200), ("EKF", None), ("UKF", None),
                      ("EnKF", 500)]
     times = {name: r["us_per_step"] for name, r in zip(names, report["results"])}
     blocks = {name: np.array(r["blocks_us"]) for name, r in zip(names, report["results"])}

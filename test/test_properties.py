@@ -1,16 +1,21 @@
 """Property-based fault tests of the core: whatever the model, input or geometry, ``predict`` and
 ``update`` raise nothing but the documented ``ValueError`` (malformed shapes, negative or non-finite
-``dt``) and never leave a non-finite mean or covariance."""
+``dt``) and never leave a non-finite mean or a covariance that is not symmetric positive definite (what
+a ROS consumer of the odometry inverts)."""
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from gpf_nav.filters import BootstrapPF, EnsembleKF, ExtendedKF, GeometricProjectionPF, UnscentedKF
+from gpf_nav.filters import (BootstrapPF, CompensatedEKF, EnsembleKF, ExtendedKF, GeometricProjectionPF,
+                             MultipleModelGPF, UnscentedKF)
+from gpf_nav.linalg import COVARIANCE_FLOOR_ABSOLUTE, COVARIANCE_FLOOR_RELATIVE, positive_definite
 from gpf_nav.models import MOON_RADIUS, MU_MOON, LinearGaussianModel, LunarDescentModel
 
 FILTERS = {
-    "gpf": lambda model, seed: GeometricProjectionPF(model, 64, seed=seed),
+    "gpf": lambda model, seed: MultipleModelGPF(model, 64, seed=seed),
+    "gpf-single": lambda model, seed: GeometricProjectionPF(model, 64, seed=seed),
+    "ekf-comp": lambda model, seed: CompensatedEKF(model, seed=seed),
     "gpf-paper": lambda model, seed: GeometricProjectionPF(model, 64, metric="euclidean", weighting="likelihood",
                                                            unmodelled_acceleration_std=0.0, seed=seed),
     "gpf-exact": lambda model, seed: GeometricProjectionPF(model, 64, weighting="corrected",
@@ -34,8 +39,15 @@ dts = st.one_of(st.sampled_from([0.0, 1e-9, 1.0, 2.0, 1e4, 1e7, 1e12]), st.float
 
 
 def assert_finite(f):
+    """A finite mean and a finite, symmetric, positive definite covariance."""
     assert np.all(np.isfinite(f.mean)), f.mean
-    assert np.all(np.isfinite(f.covariance)), f.covariance
+    assert_positive_definite(f.covariance)
+
+
+def assert_positive_definite(cov):
+    assert np.all(np.isfinite(cov)), cov
+    assert np.array_equal(cov, cov.T), cov
+    np.linalg.cholesky(cov)  # raises LinAlgError when it is not positive definite
 
 
 def lunar_prior():
@@ -118,4 +130,50 @@ def test_malformed_input_raises_value_error_only(name):
     for bad_y in (np.zeros(2), np.zeros((3, 1)), np.zeros(4)):
         with pytest.raises(ValueError):
             f.update(bad_y)
+    assert_finite(f)
+
+
+symmetric_matrices = st.integers(1, 6).flatmap(lambda n: st.tuples(
+    st.lists(st.floats(-1e3, 1e3), min_size=n * n, max_size=n * n),
+    st.lists(st.sampled_from([0.0, 0.0, -1e-9, 1e-14, 1.0, 1e6]), min_size=n, max_size=n)))
+
+
+@SETTINGS
+@given(entries=symmetric_matrices)
+def test_positive_definite_floors_any_symmetric_matrix(entries):
+    """Any symmetric matrix (rank-deficient, indefinite, all zero) comes out symmetric positive definite
+    with its eigenvalues at or above the documented floor; one whose eigenvalues are all above it is kept."""
+    values, scales = entries
+    n = len(scales)
+    basis = np.array(values).reshape(n, n)
+    low_rank = basis[:, : n // 2] @ basis[:, : n // 2].T  # rank n // 2 (0 when n = 1)
+    for cov in (low_rank, low_rank + np.diag(scales), np.diag(scales), 0.5 * (basis + basis.T)):
+        out = positive_definite(cov)
+        assert_positive_definite(out)
+        eigenvalues = np.linalg.eigvalsh(cov)
+        floor = max(COVARIANCE_FLOOR_RELATIVE * np.abs(eigenvalues).max(), COVARIANCE_FLOOR_ABSOLUTE)
+        assert np.linalg.eigvalsh(out).min() >= 0.5 * floor
+        if eigenvalues.min() >= 2.0 * floor:
+            assert np.array_equal(out, cov)  # a well-conditioned matrix is published as it is
+
+
+@pytest.mark.parametrize("name", ["gpf", "gpf-single", "spf", "enkf"])
+@SETTINGS
+@given(seed=st.integers(0, 2 ** 16), peak=st.floats(0.0, 800.0), collapsed=st.booleans())
+def test_degenerate_clouds_publish_a_positive_definite_covariance(name, seed, peak, collapsed):
+    """A cloud with every particle at one point (a prior of zero covariance) or with one particle holding
+    nearly all the weight after a very precise measurement: the covariance is positive definite."""
+    f = FILTERS[name](LunarDescentModel(), seed)
+    mean, cov = lunar_prior()
+    f.initialize(mean, 0.0 * cov if collapsed else cov)
+    assert_finite(f)
+    y = LunarDescentModel().measure(mean[None], 0.0)[0]
+    members = getattr(f, "members", (f,))
+    for member in members:
+        if hasattr(member, "_normalise"):  # weights from one dominant particle down to e^-peak
+            member._normalise(-peak * np.random.default_rng(seed).random(member.n_particles))
+            assert_finite(member)
+    assert_finite(f)
+    f.predict(1.0)
+    f.update(y + np.array([50.0, 1e-4, -1e-4]))
     assert_finite(f)

@@ -109,7 +109,7 @@ def test_installed_estimator_refuses_bad_parameters(workspace):
                             timeout=120)
     assert result.returncode == 2, result.stderr
     assert "refusing to start" in result.stderr
-    assert "'filter' = 'bogus' is not a known filter; choose one of gpf, gpf-mm, spf, ekf, ukf, enkf" in result.stderr
+    assert "'filter' = 'bogus' is not a known filter; choose one of gpf, gpf-single, gpf-mm, spf, ekf, ukf, enkf" in result.stderr
 
 
 def test_installed_simulator_and_estimator_processes_track_truth(workspace):

@@ -113,7 +113,7 @@ def _assert_diagnostics_finite(diagnostics):
 
 
 # --- simulator -> estimator ---------------------------------------------------------------------------
-@pytest.mark.parametrize("filter_name", ["gpf", "gpf-mm"])
+@pytest.mark.parametrize("filter_name", ["gpf", "gpf-single"])
 def test_simulator_to_estimator_on_sim_time_tracks_truth(ros, filter_name):
     sim_seconds, start = 200.0, 1000.0
     odom = ros.record(Odometry, "odometry/filtered")
@@ -181,7 +181,7 @@ def test_simulator_to_estimator_on_sim_time_tracks_truth(ros, filter_name):
     assert len(values["unmodelled acceleration [m/s^2]"].split()) == 3
     assert all(float(v) > 0.0 for v in values["unmodelled acceleration std [m/s^2]"].split())
     probability = values["compensated model probability"]
-    assert 0.0 <= float(probability) <= 1.0  # gpf: its model average; gpf-mm: its IMM
+    assert 0.0 <= float(probability) <= 1.0  # gpf: its IMM; gpf-single: its model average
     assert values["initialized from"] == "measurements"
     assert sim.published["measurement"] == 100
     assert int(values["measurements accepted"]) >= 95
@@ -368,7 +368,7 @@ def test_bad_inputs_are_dropped_counted_and_never_leak_nan(ros):
 
 # --- parameters ---------------------------------------------------------------------------------------
 @pytest.mark.parametrize("name, value, text", [
-    ("filter", "bogus", "'filter' = 'bogus' is not a known filter; choose one of gpf, gpf-mm, spf, ekf, ukf, enkf"),
+    ("filter", "bogus", "'filter' = 'bogus' is not a known filter; choose one of gpf, gpf-single, gpf-mm, spf, ekf, ukf, enkf"),
     ("n_particles", -5, "'n_particles' = -5 must be an integer >= 1"),
     ("ess_threshold", 1.5, "'ess_threshold' (tau) = 1.5 must lie in (0, 1]"),
     ("ess_threshold", 0.0, "'ess_threshold' (tau) = 0.0 must lie in (0, 1]"),

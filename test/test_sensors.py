@@ -116,7 +116,7 @@ def test_position_sensor_against_the_exact_posterior(name):
 
 
 @pytest.mark.parametrize("name", ["spf", "ekf", "ukf", "enkf", "gpf-paper", "gpf-printed", "gpf-exact",
-                                  "gpf-qmetric", "gpf", "ekf-comp", "gpf-mm"])
+                                  "gpf-qmetric", "gpf", "ekf-comp", "gpf-single"])
 def test_the_models_own_sensor_is_the_default_bit_for_bit(name):
     """``update(y, ModelSensor(model))`` gives exactly ``update(y)``."""
     config = ScenarioConfig(duration=40.0, case="partial")

@@ -11,7 +11,7 @@ from gpf_nav.filters import ExtendedKF
 from gpf_nav.scenario import ScenarioConfig, filter_model, generate
 
 TINY = ["--runs", "2", "--duration", "40", "--particles", "40", "--no-progress"]  # 20 steps per run
-FILTERS = (runner.GPF_NAV, runner.GPF_MULTIPLE_MODEL, runner.EKF_COMPENSATED_GATED, "EKF", "EKF, oracle-tuned Q")
+FILTERS = (runner.GPF_NAV, runner.GPF_SINGLE, runner.EKF_COMPENSATED_GATED, "EKF", "EKF, oracle-tuned Q")
 
 
 def test_stress_command_writes_every_condition_and_filter(tmp_path):

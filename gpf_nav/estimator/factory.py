@@ -14,8 +14,10 @@ from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
 from gpf_nav.filters.multiple_model import SWITCH_TIME
 from gpf_nav.models.lunar import LunarDescentModel
 
-FILTERS = ("gpf", "gpf-mm", "spf", "ekf", "ukf", "enkf")
-PARTICLE_FILTERS = ("gpf", "gpf-mm", "spf")
+FILTERS = ("gpf", "gpf-single", "gpf-mm", "spf", "ekf", "ukf", "enkf")
+"""``gpf`` is the multiple-model GPF (``gpf-mm`` is its former name, kept); ``gpf-single`` one compensated GPF."""
+PARTICLE_FILTERS = ("gpf", "gpf-single", "gpf-mm", "spf")
+GPF_FILTERS = ("gpf", "gpf-single", "gpf-mm")
 
 
 def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 0,
@@ -30,8 +32,10 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
 
     ``seed < 0`` (or None) draws a random seed; ``regularization`` and ``kernel_bandwidth`` 0 take the
     filter's defaults. Options a filter does not use are ignored (for example ``n_particles`` for the
-    EKF). With the defaults, ``make_filter("gpf", model)`` is ``GeometricProjectionPF(model)``. Raises
-    ValueError naming the offending parameter.
+    EKF). With the defaults, ``make_filter("gpf", model)`` is ``MultipleModelGPF(model)`` (``gpf-mm`` the
+    same), or the nominal ``GeometricProjectionPF`` when ``unmodelled_acceleration_std`` is 0 (no second
+    model); ``make_filter("gpf-single", model)`` is ``GeometricProjectionPF(model)`` (``nominal_prior``
+    applies to it only). Raises ValueError naming the offending parameter.
     """
     errors = check_filter_options(name, n_particles=n_particles, reference=reference,
                                   weighting=weighting, regularization=regularization,
@@ -45,7 +49,7 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
     if errors:
         raise ValueError("; ".join(errors))
     seed = None if seed is None or int(seed) < 0 else int(seed)
-    if name in ("gpf", "gpf-mm"):
+    if name in GPF_FILTERS:
         from gpf_nav.filters import GeometricProjectionPF, MultipleModelGPF
         options = dict(reference=reference, weighting=weighting, metric=metric,
                        regularization=regularization or None,
@@ -53,9 +57,11 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
                        unmodelled_acceleration_time=unmodelled_acceleration_time,
                        kernel_bandwidth=kernel_bandwidth or None, resampling=resampling,
                        ess_threshold=ess_threshold, seed=seed, collapse_steps=int(collapse_steps))
-        if name == "gpf-mm":
-            return MultipleModelGPF(model, int(n_particles), switch_time=model_switch_time, **options)
-        return GeometricProjectionPF(model, int(n_particles), nominal_prior=nominal_prior, **options)
+        if name == "gpf-single":
+            return GeometricProjectionPF(model, int(n_particles), nominal_prior=nominal_prior, **options)
+        if unmodelled_acceleration_std == 0.0:  # one model only: the nominal GPF
+            return GeometricProjectionPF(model, int(n_particles), **options)
+        return MultipleModelGPF(model, int(n_particles), switch_time=model_switch_time, **options)
     if name == "spf":
         from gpf_nav.filters import BootstrapPF
         return BootstrapPF(model, int(n_particles), resampling=resampling, ess_threshold=ess_threshold,
@@ -98,7 +104,7 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
     if name not in FILTERS:
         errors.append(f"parameter 'filter' = {name!r} is not a known filter; choose one of {', '.join(FILTERS)}")
         return errors
-    if name in ("gpf", "gpf-mm", "spf", "enkf"):
+    if name in PARTICLE_FILTERS or name == "enkf":
         minimum = 2 if name == "enkf" else 1
         if not isinstance(n_particles, (int, np.integer)) or n_particles < minimum:
             errors.append(f"parameter 'n_particles' = {n_particles!r} must be an integer >= {minimum}")
@@ -112,13 +118,13 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
             errors.append(f"parameter 'regularization' = {regularization!r} must be >= 0 (0: default)")
         if not isinstance(collapse_steps, (int, np.integer)) or collapse_steps < 0:
             errors.append(f"parameter 'collapse_steps' = {collapse_steps!r} must be an integer >= 0")
-    if name == "gpf-mm":
-        if not unmodelled_acceleration_std > 0.0:
+    if name in ("gpf", "gpf-mm"):
+        if name == "gpf-mm" and not unmodelled_acceleration_std > 0.0:
             errors.append(f"parameter 'unmodelled_acceleration_std' = {unmodelled_acceleration_std!r} must be "
                           "positive for gpf-mm (its second model is the compensated one) [m/s^2]")
         if not (math.isfinite(model_switch_time) and model_switch_time > 0.0):
             errors.append(f"parameter 'model_switch_time' = {model_switch_time!r} must be positive [s]")
-    if name in ("gpf", "gpf-mm"):
+    if name in GPF_FILTERS:
         if reference not in REFERENCES:
             errors.append(f"parameter 'reference' = {reference!r} must be one of {', '.join(REFERENCES)}")
         if weighting not in WEIGHTINGS:

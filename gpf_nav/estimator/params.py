@@ -27,7 +27,7 @@ class Spec:
 
 ESTIMATOR = [
     # filter
-    Spec("filter", "gpf", "Filter: gpf (geometric projection PF), gpf-mm (multiple-model GPF: nominal or compensated), spf (bootstrap PF), ekf, ukf or enkf."),
+    Spec("filter", "gpf", "Filter: gpf (geometric projection PF, multiple model: nominal or compensated), gpf-single (one compensated GPF), gpf-mm (= gpf), spf (bootstrap PF), ekf, ukf or enkf."),
     Spec("n_particles", 500, "Number of particles / ensemble members N (gpf, spf, enkf); integer >= 1 (>= 2 for enkf)."),
     Spec("seed", 0, "Seed of the filter's random stream; negative: a random seed."),
     Spec("reference", "innovation", "GPF projection reference: innovation or increment."),
@@ -36,8 +36,8 @@ ESTIMATOR = [
     Spec("regularization", 0.0, "Tikhonov eps of the projection, >= 0; 0: the metric's default (1 for cloud, 1e-6 otherwise); relative for euclidean, in measurement-noise units otherwise."),
     Spec("unmodelled_acceleration_std", 0.1, "gpf: stationary std of the estimated unmodelled acceleration [m/s^2]; 0 turns the compensation off."),
     Spec("unmodelled_acceleration_time", 1.0e6, "gpf: correlation time of the unmodelled acceleration [s], > 0."),
-    Spec("nominal_prior", 0.5, "gpf: prior probability that the model needs no unmodelled acceleration; the estimate averages the two hypotheses; 0 publishes the compensated posterior as it is; in [0, 1)."),
-    Spec("model_switch_time", 2.0e5, "gpf-mm: mean sojourn time of the nominal / compensated model chain [s], > 0."),
+    Spec("nominal_prior", 0.5, "gpf-single: prior probability that the model needs no unmodelled acceleration; the estimate averages the two hypotheses; 0 publishes the compensated posterior as it is; in [0, 1)."),
+    Spec("model_switch_time", 2.0e5, "gpf: mean sojourn time of the nominal / compensated model chain [s], > 0."),
     Spec("kernel_bandwidth", 0.0, "gpf, cloud metric: kernel bandwidth h in (0, 1); 0: the default, 1.6 times the Gaussian-optimal one for N and the state dimension (at most 0.95)."),
     Spec("collapse_steps", 0, "gpf/spf: re-initialise after this many consecutive updates with ESS < 1.5 particles; 0 never."),
     Spec("resampling", "systematic", "Resampling scheme: systematic, stratified, residual or multinomial."),

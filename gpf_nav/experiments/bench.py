@@ -1,7 +1,8 @@
 """``gpf-nav bench``: per-step cost (one ``predict`` + one ``update``) of every filter on the lunar model.
 
-"GPF" is the default (navigation-grade) configuration, "GPF-paper" the paper's (:data:`PAPER_GPF`),
-"GPF-mm" the multiple-model option (two GPFs of N particles each).
+"GPF" is the default (navigation-grade) configuration, the multiple-model GPF (two GPFs of N particles
+each), "GPF-paper" the paper's (:data:`PAPER_GPF`), "GPF-single" one navigation-grade GPF of N particles
+on the compensated model (the default before the multiple model).
 Each filter runs on the same seeded lunar-descent measurements, each step on the next measurement. A step
 is timed over a block of steps. The filters of one group (the particle filters of one N; the Gaussian
 filters and the EnKF) run their blocks in turn, round after round, the order rotating each round, so a
@@ -39,10 +40,10 @@ def _groups(particle_counts) -> list[list[tuple[str, int | None, object]]]:
     groups = []
     for n in particle_counts:
         groups.append([
-            ("GPF", n, lambda model, seed, n=n: GeometricProjectionPF(model, n, seed=seed)),
+            ("GPF", n, lambda model, seed, n=n: MultipleModelGPF(model, n, seed=seed)),
             ("GPF-paper", n,
              lambda model, seed, n=n: GeometricProjectionPF(model, n, seed=seed, **PAPER_GPF)),
-            ("GPF-mm", n, lambda model, seed, n=n: MultipleModelGPF(model, n, seed=seed)),
+            ("GPF-single", n, lambda model, seed, n=n: GeometricProjectionPF(model, n, seed=seed)),
             ("SPF", n, lambda model, seed, n=n: BootstrapPF(model, n, seed=seed))])
     groups.append([("EKF", None, lambda model, seed: ExtendedKF(model, seed=seed)),
                    ("UKF", None, lambda model, seed: UnscentedKF(model, seed=seed)),

@@ -42,7 +42,7 @@ from gpf_nav.scenario import Scenario, ScenarioConfig, filter_model, generate
 
 VARIANTS = ("GPF", "GPF-paper", "GPF-Q", "SPF", "SPF-2k")
 VARIANT_LABELS = {
-    "GPF": "GPF default (cloud metric, exact weights, unmodelled-acceleration compensation), N particles",
+    "GPF": "GPF default (multiple model: nominal and compensated navigation-grade GPFs), N particles each",
     "GPF-paper": "the paper's GPF (innovation reference, likelihood weights, Euclidean metric), N particles",
     "GPF-Q": "GPF, process-noise metric, regularization 1, corrected weights, N particles",
     "SPF": "bootstrap PF with the diagnostic co-state, N particles",
@@ -56,10 +56,10 @@ FIGURES = Path(__file__).resolve().parents[2] / "docs" / "figures"
 
 def make_filter(variant: str, model, n_particles: int, seed: int):
     """The filter of ``variant`` (one of :data:`VARIANTS`)."""
-    from gpf_nav.filters import BootstrapPF, GeometricProjectionPF
+    from gpf_nav.filters import BootstrapPF, GeometricProjectionPF, MultipleModelGPF
 
     if variant == "GPF":
-        return GeometricProjectionPF(model, n_particles, seed=seed)
+        return MultipleModelGPF(model, n_particles, seed=seed)
     if variant == "GPF-paper":
         return GeometricProjectionPF(model, n_particles, metric="euclidean", weighting="likelihood",
                                      unmodelled_acceleration_std=0.0, seed=seed)

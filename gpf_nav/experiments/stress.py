@@ -10,7 +10,8 @@ Conditions (each a change of the scenario, ``docs/scenario.md``; the truth flies
 * ``prior-x<s>``: the prior-size sweep, position sigma ``s`` km and velocity sigma ``s`` m/s for each
   ``s`` of ``--prior-scales`` (default 1, 3, 10; ``large-prior`` is the point ``s = 20``).
 
-Filters (``--filters``, default): the default GPF (``gpf``), ``gpf-mm``, the compensated EKF with the
+Filters (``--filters``, default): the default GPF (``gpf``, the multiple-model GPF), the single
+compensated GPF (``gpf-single``), the compensated EKF with the
 GPF's innovation gate (``ekf-comp-gated``), the nominal EKF (``ekf``) and the oracle-tuned EKF
 (``ekf-oracle``: per condition, the process-noise multiplier with the lowest mean position RMSE over the
 same runs). Run ``r`` of every condition uses the same random numbers (paired: the conditions differ
@@ -43,7 +44,7 @@ from gpf_nav.experiments.runner import (ALIASES, DEFAULT_PARTICLES, PARTICLE_FIL
 from gpf_nav.scenario import ScenarioConfig
 
 SCHEMA = "gpf_nav.stress/1"
-DEFAULT_FILTERS = "gpf,gpf-mm,ekf-comp-gated,ekf,ekf-oracle"
+DEFAULT_FILTERS = "gpf,gpf-single,ekf-comp-gated,ekf,ekf-oracle"
 PRIOR_SCALES = (1.0, 3.0, 10.0)
 """Default prior-size sweep: position sigma ``s`` km, velocity sigma ``s`` m/s."""
 CONDITIONS = {

@@ -82,6 +82,8 @@ class ModelErrorCompensated:
             average = (0.0, mean[:n], cov[:n, :n], a, A)
         else:
             probability, m, P = model_average(mean, cov, n, self.model.acceleration_std, self.nominal_prior)
+            if not (np.isfinite(m).all() and np.isfinite(P).all()):  # the average overflowed (a runaway
+                probability, m, P = 0.0, mean[:n], cov[:n, :n]      # estimate): the compensated posterior
             if probability > 0.0:  # the nominal model's acceleration is zero
                 a, A = mixture_moments((probability, 1.0 - probability),
                                        [(np.zeros_like(a), np.zeros_like(A)), (a, A)])

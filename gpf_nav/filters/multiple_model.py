@@ -106,7 +106,9 @@ class MultipleModelGPF:
         mu = self._predicted_probabilities
         if comparable:
             evidence = np.array([m.log_likelihood for m in self.members])
-            mu = mu * np.exp(evidence - evidence.max())
+            posterior = mu * np.exp(evidence - evidence.max())
+            if np.isfinite(posterior).all() and posterior.sum() > 0.0:  # else the data cannot tell them apart
+                mu = posterior
         self.model_probabilities = mu / mu.sum()
         self._predicted_probabilities = self.model_probabilities
         self._mix_due = True
@@ -116,7 +118,9 @@ class MultipleModelGPF:
         mu = self.model_probabilities
         chain = np.array([[1.0 - p, p], [p, 1.0 - p]])
         predicted = chain.T @ mu
-        weights = chain * mu[:, None] / predicted[None, :]  # weights[i, j] = mu_{i|j}
+        # weights[i, j] = mu_{i|j}; a model of probability 0 keeps its own estimate
+        weights = np.where(predicted > 0.0, chain * mu[:, None] / np.where(predicted > 0.0, predicted, 1.0),
+                           np.eye(2))
         moments = [self._nominal_augmented(), (self.compensated.augmented_mean,
                                                self.compensated.augmented_covariance)]
         n = self.model.state_dim

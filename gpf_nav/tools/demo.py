@@ -22,7 +22,7 @@ from gpf_nav.scenario import ScenarioConfig, filter_model
 
 def _parser() -> CommandParser:
     ap = CommandParser(prog="gpf-nav demo", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--filter", default="gpf", choices=FILTERS, help="gpf | gpf-mm | spf | ekf | ukf | enkf (default gpf)")
+    ap.add_argument("--filter", default="gpf", choices=FILTERS, help=" | ".join(FILTERS) + " (default gpf)")
     ap.add_argument("--particles", type=positive_int, default=500, help="N (default 500)")
     ap.add_argument("--duration", type=positive_float, default=300.0, help="simulated seconds (default 300)")
     ap.add_argument("--rate-factor", type=positive_float, default=20.0, help="simulated s per wall s (default 20)")
