@@ -595,6 +595,8 @@ class EstimatorEngine:
             out["costate_norm_max"] = float(f.costate_norm_max)
         if hasattr(f, "gated"):
             out["gated"] = int(f.gated)
+        if hasattr(f, "tempered_updates"):
+            out["tempered_updates"] = int(f.tempered_updates)
         probabilities = getattr(f, "model_probabilities", None)
         if probabilities is not None:
             out["compensated_model_probability"] = float(probabilities[1])

@@ -222,6 +222,11 @@ class MultipleModelGPF:
         return self.nominal.resample_count + self.compensated.resample_count
 
     @property
+    def tempered_updates(self) -> int:
+        """Updates either member split into tempering stages, both members."""
+        return self.nominal.tempered_updates + self.compensated.tempered_updates
+
+    @property
     def gated(self) -> int:
         """Measurement components refused by the innovation gate, both members."""
         return self.nominal.gated + self.compensated.gated

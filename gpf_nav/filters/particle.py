@@ -62,6 +62,7 @@ class ParticleFilter(Filter):
 
     Attributes:
         tempering_stages: stages of the last update (1 when it was not split).
+        tempered_updates: updates split into more than one stage so far.
     """
 
     def __init__(self, model: StateSpaceModel, n_particles: int = 500, resampling: str = "systematic",
@@ -72,6 +73,7 @@ class ParticleFilter(Filter):
             raise ValueError(f"tempering_ess must lie in [0, 1), got {tempering_ess}")
         self.tempering_ess = float(tempering_ess)
         self.tempering_stages = 1
+        self.tempered_updates = 0
         self._fraction = 1.0
         self._first_draw = True
         if int(collapse_steps) < 0:
@@ -248,6 +250,7 @@ class ParticleFilter(Filter):
             if fraction < remaining and remaining - fraction < 1e-12:
                 fraction = remaining
         self._fraction = 1.0
+        self.tempered_updates += self.tempering_stages > 1
         self.log_likelihood = evidence
         self._after_update(y, rows)
         self._check_collapse()

@@ -92,6 +92,7 @@ def filter_status(engine, now_ns: int | None, thresholds: Thresholds, filter_nam
         ("co-state norm max", _fmt(stats["costate_norm_max"]) if "costate_norm_max" in stats else "n/a"),
         ("resample count", str(stats.get("resample_count", "n/a"))),
         ("outlier components gated", str(stats.get("gated", "n/a"))),
+        ("tempered updates", str(stats.get("tempered_updates", "n/a"))),
         ("unmodelled acceleration [m/s^2]", _vector(stats.get("unmodelled_acceleration"))),
         ("unmodelled acceleration std [m/s^2]", _vector(stats.get("unmodelled_acceleration_std"))),
         ("compensated model probability", _fmt(stats["compensated_model_probability"])
