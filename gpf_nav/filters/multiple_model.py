@@ -222,6 +222,11 @@ class MultipleModelGPF:
         return self.nominal.resample_count + self.compensated.resample_count
 
     @property
+    def reference(self) -> str:
+        """The members' innovation reference (``innovation`` or ``increment``)."""
+        return self.nominal.reference
+
+    @property
     def tempered_updates(self) -> int:
         """Updates either member split into tempering stages, both members."""
         return self.nominal.tempered_updates + self.compensated.tempered_updates
