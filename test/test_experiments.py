@@ -153,6 +153,11 @@ def test_sweep_merge_reruns_only_the_named_rows(tmp_path, capsys):
               "full", "--no-plots", "--no-progress"] + SHORT
     assert cli.main(common + ["--filters", "ekf,spf", "--out", str(first)]) == 0
     earlier = json.loads((first / "sweep_mismatch.json").read_text())
+    # a row of a filter this version no longer knows (a renamed one) is dropped by the merge
+    earlier["settings"]["filters"].append("GPF of an older name")
+    for key in ("filters", "failures"):
+        earlier["cases"]["full"][key]["GPF of an older name"] = earlier["cases"]["full"][key]["SPF"]
+    (first / "sweep_mismatch.json").write_text(json.dumps(earlier))
     assert cli.main(common + ["--filters", "ekf,ekf-comp", "--out", str(second),
                               "--merge", str(first / "sweep_mismatch.json")]) == 0
     merged = json.loads((second / "sweep_mismatch.json").read_text())
@@ -162,6 +167,8 @@ def test_sweep_merge_reruns_only_the_named_rows(tmp_path, capsys):
     assert rows["EKF"] == earlier["cases"]["full"]["filters"]["EKF"]  # re-run: deterministic
     assert rows[runner.EKF_COMPENSATED]["position_rmse_km"][0]["n"] == 2
     assert merged["meta"]["rerun"] == ["EKF", runner.EKF_COMPENSATED]
+    assert merged["meta"]["dropped"] == ["GPF of an older name"]
+    assert "GPF of an older name" not in merged["settings"]["filters"]
     assert merged["meta"]["earlier"] == earlier["meta"]
     with pytest.raises(SystemExit):  # not the same sweep: 3 runs against 2 (refused before running)
         sweep_main = common + ["--filters", "ekf", "--out", str(second), "--merge", str(first / "sweep_mismatch.json")]

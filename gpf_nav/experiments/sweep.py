@@ -15,7 +15,8 @@ The co-state / degeneracy figure comes from ``gpf-nav montecarlo`` (it needs the
 ``--merge REPORT`` re-runs only ``--filters`` and puts their rows into an earlier report of the same
 sweep (same values, runs, seed, particles and scenario; refused otherwise), keeping its other rows: the
 paired design makes each row independent of the others, so a changed filter need not cost a whole
-campaign. The merged report's ``meta`` names the rows it re-ran and keeps the earlier ``meta``.
+campaign. The merged report's ``meta`` names the rows it re-ran and keeps the earlier ``meta``. Rows of
+filters this version no longer knows (a renamed row) are dropped, and ``meta`` names them.
 """
 from __future__ import annotations
 
@@ -34,7 +35,8 @@ from gpf_nav.experiments.montecarlo import (add_common_arguments, base_config, g
                                             parse_filters,
                                             per_run_values, run_metadata, write_json)
 from gpf_nav.experiments.parallel import map_tasks
-from gpf_nav.experiments.runner import PARTICLE_FILTERS, RunTask, run_task, select_oracle
+from gpf_nav.experiments.runner import (EXTRA_FILTERS, FILTERS, ORACLE_FAMILIES, PARTICLE_FILTERS, RunTask, run_task,
+                                        select_oracle)
 from gpf_nav.scenario import ScenarioConfig
 
 SCHEMA = "gpf_nav.sweep/2"
@@ -122,14 +124,20 @@ def merge(earlier: dict, update: dict) -> dict:
     check_same_sweep(earlier, update["param"], update["values"], update["cases"], update["settings"])
     merged = json.loads(json.dumps(earlier))
     names = update["settings"]["filters"]
-    merged["settings"]["filters"] = list(dict.fromkeys(merged["settings"]["filters"] + list(names)))
+    known = set(FILTERS) | set(EXTRA_FILTERS) | set(ORACLE_FAMILIES)
+    dropped = [f for f in merged["settings"]["filters"] if f not in known and f not in names]
+    merged["settings"]["filters"] = list(dict.fromkeys(
+        [f for f in merged["settings"]["filters"] if f not in dropped] + list(names)))
     for case, entry in update["cases"].items():
         target = merged["cases"][case]
+        for name in dropped:
+            target["filters"].pop(name, None)
+            target["failures"].pop(name, None)
         for name in names:
             target["filters"][name] = entry["filters"][name]
             target["failures"][name] = entry["failures"][name]
         target["oracle_multiplier"].update(entry["oracle_multiplier"])
-    merged["meta"] = dict(update.get("meta", {}), rerun=list(names), earlier=earlier.get("meta"))
+    merged["meta"] = dict(update.get("meta", {}), rerun=list(names), dropped=dropped, earlier=earlier.get("meta"))
     return merged
 
 
