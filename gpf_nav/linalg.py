@@ -67,26 +67,38 @@ def solve_spd(S: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 COVARIANCE_FLOOR_RELATIVE = 1e-10
-"""Smallest eigenvalue of a published covariance, relative to its largest (see :func:`positive_definite`)."""
+"""Smallest eigenvalue of a published covariance's correlation matrix, relative to its largest and at
+least 1 (see :func:`positive_definite`)."""
 COVARIANCE_FLOOR_ABSOLUTE = 1e-12
-"""Smallest eigenvalue of a published covariance in the state's own units squared (a collapsed cloud)."""
+"""Smallest variance of a published covariance, in the state's own units squared (a collapsed cloud)."""
 
 
 def positive_definite(cov: np.ndarray) -> np.ndarray:
-    """The symmetric part of ``cov`` ``(n, n)``, its eigenvalues raised to a floor where they are below.
+    """The symmetric part of ``cov`` ``(n, n)``, made positive definite where it is not, whatever the
+    units of its components.
 
-    The floor is ``max(COVARIANCE_FLOOR_RELATIVE * largest |eigenvalue|, COVARIANCE_FLOOR_ABSOLUTE)``: a
-    degenerate particle cloud, a collapsed weight or rounding in a product gives a covariance whose
-    condition number is at most 1e10, which every consumer can factor and invert. A matrix with every
-    eigenvalue at or above the floor is returned as it is (symmetrised); a non-finite one unchanged
-    (symmetrised), for the caller's non-finite checks.
+    Each variance is raised to at least ``COVARIANCE_FLOOR_ABSOLUTE`` (a component a collapsed cloud
+    no longer spreads); then the eigenvalues of the correlation matrix ``D^-1/2 cov D^-1/2``
+    (``D`` the variances) are raised to at least ``COVARIANCE_FLOOR_RELATIVE`` times the largest of them
+    (itself 1 to ``n`` for a covariance, more only for a matrix that is far from one). The floor is on the
+    correlations, not on the matrix itself, so it does not depend on the states' units: a covariance of
+    positions of kilometres and accelerations of millimetres per second squared keeps its small
+    variances. Any consumer can factor and invert the result (its correlation matrix has a condition
+    number of at most about 1e10). A matrix already above both floors is returned as it is
+    (symmetrised); a non-finite one unchanged (symmetrised), for the caller's non-finite checks.
     """
     cov = 0.5 * (cov + cov.T)
     if not np.isfinite(cov).all():
         return cov
-    vals, vecs = np.linalg.eigh(cov)
-    floor = max(COVARIANCE_FLOOR_RELATIVE * float(np.abs(vals).max()), COVARIANCE_FLOOR_ABSOLUTE)
+    variances = cov.diagonal()
+    if variances.min() < COVARIANCE_FLOOR_ABSOLUTE:
+        cov = cov.copy()
+        np.fill_diagonal(cov, np.maximum(variances, COVARIANCE_FLOOR_ABSOLUTE))
+    scale = np.sqrt(cov.diagonal())
+    vals, vecs = np.linalg.eigh(cov / np.outer(scale, scale))
+    floor = COVARIANCE_FLOOR_RELATIVE * max(1.0, float(vals[-1]))
     if vals[0] >= floor:
-        return cov
+        return cov  # (the variances raised, if any were below their floor)
     floored = (vecs * np.maximum(vals, floor)) @ vecs.T
-    return 0.5 * (floored + floored.T)
+    floored = 0.5 * (floored + floored.T) * np.outer(scale, scale)
+    return floored

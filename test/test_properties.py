@@ -141,8 +141,9 @@ symmetric_matrices = st.integers(1, 6).flatmap(lambda n: st.tuples(
 @SETTINGS
 @given(entries=symmetric_matrices)
 def test_positive_definite_floors_any_symmetric_matrix(entries):
-    """Any symmetric matrix (rank-deficient, indefinite, all zero) comes out symmetric positive definite
-    with its eigenvalues at or above the documented floor; one whose eigenvalues are all above it is kept."""
+    """Any symmetric matrix (rank-deficient, indefinite, all zero) comes out symmetric positive definite,
+    its variances and its correlation matrix's eigenvalues at or above the documented floors; one above
+    them is kept as it is."""
     values, scales = entries
     n = len(scales)
     basis = np.array(values).reshape(n, n)
@@ -150,11 +151,31 @@ def test_positive_definite_floors_any_symmetric_matrix(entries):
     for cov in (low_rank, low_rank + np.diag(scales), np.diag(scales), 0.5 * (basis + basis.T)):
         out = positive_definite(cov)
         assert_positive_definite(out)
-        eigenvalues = np.linalg.eigvalsh(cov)
-        floor = max(COVARIANCE_FLOOR_RELATIVE * np.abs(eigenvalues).max(), COVARIANCE_FLOOR_ABSOLUTE)
-        assert np.linalg.eigvalsh(out).min() >= 0.5 * floor
-        if eigenvalues.min() >= 2.0 * floor:
+        assert out.diagonal().min() >= 0.99 * COVARIANCE_FLOOR_ABSOLUTE
+        assert np.linalg.cond(_correlation(out)) <= 10.0 / COVARIANCE_FLOOR_RELATIVE  # (rounding: 1e11)
+        if (cov.diagonal().min() >= COVARIANCE_FLOOR_ABSOLUTE
+                and np.linalg.eigvalsh(_correlation(cov)).min() >= 2.0 * COVARIANCE_FLOOR_RELATIVE):
             assert np.array_equal(out, cov)  # a well-conditioned matrix is published as it is
+
+
+def _correlation(cov):
+    scale = np.sqrt(cov.diagonal())
+    return cov / np.outer(scale, scale)
+
+
+def test_the_floor_does_not_depend_on_the_units():
+    """Positions in km^2 beside accelerations in (mm/s^2)^2: a sound covariance is kept, and a singular one
+    keeps its small variances (a floor relative to the largest eigenvalue would have raised them by
+    orders of magnitude)."""
+    sound = np.diag([4e8] * 3 + [1e-2] * 3 + [1e-6] * 3)
+    assert np.array_equal(positive_definite(sound), sound)
+    direction = np.arange(1.0, 10.0) * np.sqrt(sound.diagonal())
+    singular = sound + np.outer(direction, direction)
+    singular[0, :], singular[:, 0] = singular[1, :], singular[:, 1]  # two equal states: rank-deficient
+    singular[0, 0] = singular[1, 1]
+    out = positive_definite(singular)
+    assert_positive_definite(out)
+    np.testing.assert_allclose(out.diagonal(), singular.diagonal(), rtol=1e-6)
 
 
 @pytest.mark.parametrize("name", ["gpf", "gpf-single", "spf", "enkf"])
