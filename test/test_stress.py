@@ -82,3 +82,12 @@ def test_stress_refuses_an_unknown_condition_before_running(tmp_path):
     with pytest.raises(SystemExit) as stop:
         cli.main(["stress", "--conditions", "large-prior,solar-storm", "--out", str(tmp_path)] + TINY)
     assert stop.value.code == 2 and not (tmp_path / "stress.json").exists()
+
+
+def test_tempering_comparison_runs_every_variant(capsys):
+    from gpf_nav.experiments import tempering
+    assert tempering.main(["--runs", "1", "--duration", "20", "--particles", "40", "--workers", "1"]) == 0
+    out = capsys.readouterr().out
+    rows = [line for line in out.splitlines() if line.startswith("| single") or line.startswith("| multiple")]
+    assert len(rows) == 2 * len(tempering.VARIANTS)
+    assert "nan" not in " ".join(rows)
