@@ -218,6 +218,23 @@ class ParticleFilter(Filter):
         self._require_initialized()
         sensor = self._use(sensor)
         y, rows = self._check_measurement(y, sensor)
+        try:
+            evidence, rows = self._tempered_stages(y, rows)
+        finally:
+            self._fraction = 1.0
+        if evidence is None:  # the filter re-initialised itself
+            return
+        self.tempered_updates += self.tempering_stages > 1
+        self.log_likelihood = evidence
+        self._after_update(y, rows)
+        self._check_collapse()
+        self._updates += 1
+        if self._updates % _REMEMBER_EVERY == 0:
+            self._remember(*self._estimate())
+
+    def _tempered_stages(self, y: np.ndarray, rows: np.ndarray) -> tuple[float | None, np.ndarray]:
+        """The stages of :meth:`update`: ``(sum of the stages' log-evidences, the rows used)``, with
+        ``None`` for the evidence when the filter had to re-initialise."""
         remaining, fraction, evidence = 1.0, 1.0, 0.0
         self._first_draw, draws, self.tempering_stages = True, 0, 0
         while True:
@@ -230,33 +247,23 @@ class ParticleFilter(Filter):
                 increment = increment + self._log_likelihood(x, y, rows)
             if (self.tempering_ess and draws < TEMPERING_DRAWS and rows.any()
                     and _ess(self._logw + increment) < self.tempering_ess):
-                fraction /= TEMPERING_FACTOR  # refused: the particles stay the prediction
+                fraction /= TEMPERING_FACTOR  # refused: the cloud stays as it was
                 continue
             self._x = x
             self._pending_dt = 0.0
             self.tempering_stages += 1
             if not self._discard_non_finite():
-                self._fraction = 1.0
-                return
+                return None, rows
             if not self._reweight(increment):
-                self._fraction = 1.0
                 self._recover("every particle weight is zero or NaN")
-                return
+                return None, rows
             evidence += self.log_likelihood
             remaining -= fraction
             if remaining <= 0.0 or not rows.any():
-                break
+                return evidence, rows
             fraction = min(remaining, TEMPERING_FACTOR * fraction)
-            if fraction < remaining and remaining - fraction < 1e-12:
+            if remaining - fraction < 1e-12:  # (rounding: the last stage takes what is left)
                 fraction = remaining
-        self._fraction = 1.0
-        self.tempered_updates += self.tempering_stages > 1
-        self.log_likelihood = evidence
-        self._after_update(y, rows)
-        self._check_collapse()
-        self._updates += 1
-        if self._updates % _REMEMBER_EVERY == 0:
-            self._remember(*self._estimate())
 
     def _use(self, sensor: Sensor | None) -> Sensor:
         """Make ``sensor`` (None: the model's own) the one this update measures with, and read its noise
