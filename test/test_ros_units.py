@@ -114,6 +114,18 @@ def test_make_filter_runs_every_filter(name):
     assert np.all(np.isfinite(f.mean))
 
 
+def test_the_default_gpf_is_the_multiple_model_gpf():
+    from gpf_nav.filters import GeometricProjectionPF, MultipleModelGPF
+    model = filter_model(SHORT)
+    assert isinstance(make_filter("gpf", model, n_particles=50), MultipleModelGPF)
+    assert isinstance(make_filter("gpf-mm", model, n_particles=50), MultipleModelGPF)
+    single = make_filter("gpf-single", model, n_particles=50, nominal_prior=0.3)
+    assert isinstance(single, GeometricProjectionPF) and single.nominal_prior == 0.3
+    nominal = make_filter("gpf", model, n_particles=50, unmodelled_acceleration_std=0.0)
+    assert isinstance(nominal, GeometricProjectionPF) and not nominal.compensated
+    assert make_filter("gpf", model, n_particles=50, model_switch_time=7.0).switch_time == 7.0
+
+
 @pytest.mark.parametrize("options, text", [
     (dict(name="bogus"), "'filter' = 'bogus' is not a known filter"),
     (dict(name="gpf", n_particles=-5), "'n_particles' = -5"),
