@@ -232,7 +232,9 @@ def test_simulator_and_estimator_processes_exchange_every_sensor(ros, tmp_path):
     from gpf_nav.estimator.params import parameters_from_files, simulator_specs
     from gpf_nav.ros.simulator_node import events_from_parameters, scenario_from_parameters
     sim_args = ["-p", "rate_factor:=20.0", "-p", "scenario.duration:=160.0", "-p", "start_time:=1000.0",
-                "-p", "start_delay:=3.0", "-p", "truth_rate:=0.0", "-p", "publish_suite:=true",
+                # a busy machine may take seconds to match the new process's publishers with the
+                # estimator (sensor data QoS: what is sent before that is lost), hence the long delay
+                "-p", "start_delay:=10.0", "-p", "truth_rate:=0.0", "-p", "publish_suite:=true",
                 "-p", "suite.trn_outlier_probability:=0.0", "-p", "suite.altimeter_max_altitude:=1000000.0",
                 "-p", "suite.velocimeter_max_altitude:=1000000.0"]
     p = parameters_from_files(simulator_specs(), "lunar_simulator", [ROOT / "config/simulator.yaml"],
@@ -253,7 +255,8 @@ def test_simulator_and_estimator_processes_exchange_every_sensor(ros, tmp_path):
             values = _status(diagnostics) or {}
             return all(values.get(f"accepted {s}") == str(n) for s, n in expected.items())
 
-        assert ros.spin_until(all_fused, 60.0), (_status(diagnostics), expected)
+        assert ros.spin_until(all_fused, 60.0), ({k: v for k, v in (_status(diagnostics) or {}).items()
+                                                  if k.startswith(("accepted", "rejected", "late"))}, expected)
         values = _status(diagnostics)
         assert all(values[f"rejected {s}"] == "0" for s in expected), values
         assert all(n > 5 for n in expected.values()) and int(values["late measurements fused"]) >= \
