@@ -75,3 +75,22 @@ def test_options_are_checked_and_runs_repeat_bit_for_bit():
     assert MultipleModelGPF(constant_velocity()).compensated.model_probabilities is None
     ys = simulate(constant_velocity(), MEAN, 20, 1.0, seed=13)
     np.testing.assert_array_equal(run(ys, seed=5).covariance, run(ys, seed=5).covariance)
+
+
+def test_only_the_nominal_member_is_mixed():
+    """One-way mixing: a prediction moves the compensated member exactly as if it ran alone (its model
+    contains the nominal one), while the nominal member is pulled towards the mixture."""
+    import copy
+    ys = simulate(constant_velocity(), MEAN, 20, 1.0, seed=3)
+    f = MultipleModelGPF(constant_velocity(), 300, seed=1, unmodelled_acceleration_std=SIGMA,
+                         unmodelled_acceleration_time=TAU, switch_time=5.0)  # p = 0.18 per step
+    f.initialize(MEAN, COV)
+    for y in ys:
+        f.predict(1.0)
+        f.update(y)
+    alone, nominal_alone = copy.deepcopy(f.compensated), copy.deepcopy(f.nominal)
+    f.predict(1.0)
+    alone.predict(1.0)
+    nominal_alone.predict(1.0)
+    assert np.array_equal(f.compensated.particles, alone.particles)
+    assert not np.allclose(f.nominal.mean, nominal_alone.mean)
