@@ -29,7 +29,7 @@ there is none).
 It is the default GPF (``make_filter("gpf")``, the node). What it buys and costs on the lunar descent is
 measured in ``docs/results.md``: the accuracy of the nominal filter when the model is right, the
 compensated filter's when it is not, and the nominal filter's where the compensation cannot be observed
-(range only), at twice the cost of one GPF.
+(range only), at two to three times the cost of one GPF.
 """
 from __future__ import annotations
 
