@@ -502,7 +502,7 @@ def _ess(logw: np.ndarray) -> float:
     if not -np.inf < peak < np.inf:
         return 0.0
     w = np.exp(logw - peak)
-    return float(w.sum() ** 2 / np.einsum("n,n->", w, w) / logw.size)
+    return resamplers.effective_sample_size(w / w.sum()) / logw.size
 
 
 def select_rows(H: np.ndarray, rows: np.ndarray) -> np.ndarray:
