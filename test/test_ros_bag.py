@@ -13,8 +13,6 @@
 """
 import json
 import math
-import os
-import random
 import subprocess
 import sys
 import time
@@ -22,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from domains import fresh_domain
 
 rclpy = pytest.importorskip("rclpy")
 pytest.importorskip("rosbags")
@@ -402,7 +402,7 @@ def test_replay_gives_the_nodes_estimates_and_counters(tmp_path):
     assert len(replayed) == summary["updates"] + 1  # publish_rate 0: the updates and the set_state's
 
     context = rclpy.Context()
-    rclpy.init(args=[], context=context, domain_id=random.Random(os.getpid() ^ time.time_ns()).randrange(110, 230))
+    rclpy.init(args=[], context=context, domain_id=fresh_domain())
     executor = SingleThreadedExecutor(context=context)
     overrides = [Parameter(k, value=v) for k, v in (("publish_rate", 0.0), ("n_particles", 100),
                                                      ("use_sim_time", True))]

@@ -10,7 +10,6 @@ workspace, and the installed console scripts run as separate processes over DDS:
 Skipped only when colcon is not importable (CI installs it).
 """
 import os
-import random
 import shutil
 import signal
 import subprocess
@@ -20,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from domains import fresh_domain
 
 pytest.importorskip("colcon_core")
 pytest.importorskip("colcon_ros")
@@ -113,7 +114,7 @@ def test_installed_estimator_refuses_bad_parameters(workspace):
 
 
 def test_installed_simulator_and_estimator_processes_track_truth(workspace):
-    domain = random.Random(os.getpid() ^ time.time_ns()).randrange(110, 230)
+    domain = fresh_domain()
     env = _installed_env(workspace, domain)
     lib = workspace / "install" / "gpf_nav" / "lib" / "gpf_nav"
     share = workspace / "install" / "gpf_nav" / "share" / "gpf_nav" / "config"

@@ -6,7 +6,6 @@ estimator, even started after the trajectory began, is initialised at once, publ
 awaited with generous deadlines, and rates are read from the messages' own stamps."""
 import math
 import os
-import random
 import signal
 import subprocess
 import sys
@@ -15,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from domains import fresh_domain
 
 rclpy = pytest.importorskip("rclpy")
 
@@ -45,7 +46,7 @@ def _spin_until(executor, condition, timeout: float, procs=()) -> bool:
 
 
 def test_simulator_and_estimator_with_no_arguments(tmp_path):
-    domain = random.Random(os.getpid() ^ time.time_ns() ^ 0xDEF).randrange(110, 230)
+    domain = fresh_domain()
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                PYTHONPATH=str(ROOT))
     context = rclpy.Context()

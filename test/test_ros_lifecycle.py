@@ -5,13 +5,14 @@ subscriber, with ``tf2_msgs`` built from its definition (test/interfaces.py), an
 names an undeclared parameter. Conditions are awaited; "publishes nothing" is judged by the stamps
 (the node stamps its predictions with its clock), not by how long we listened."""
 import os
-import random
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 import pytest
+
+from domains import fresh_domain
 
 rclpy = pytest.importorskip("rclpy")
 
@@ -29,7 +30,11 @@ from gpf_nav.ros.diagnostics import STATUS_NAME, parse_values  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 NODE = "/gpf_estimator"
 WAIT = 120.0  # s: generous deadline of every awaited condition (a busy 2-core machine)
-_DOMAINS = iter(random.Random(os.getpid() ^ time.time_ns() ^ 0x11FE).sample(range(110, 230), 20))
+RESEND = 5.0  # s: an unanswered service request is sent again after this (see Graph.call)
+GOAL = {Transition.TRANSITION_CONFIGURE: "inactive", Transition.TRANSITION_ACTIVATE: "active",
+        Transition.TRANSITION_DEACTIVATE: "inactive", Transition.TRANSITION_CLEANUP: "unconfigured",
+        Transition.TRANSITION_UNCONFIGURED_SHUTDOWN: "finalized"}
+"""The state each transition the tests send leads to."""
 STATE = [1.8e6, 0.0, 0.0, 0.0, 1.6e3, 0.0]  # a lunar orbit state [m, m/s] handed over on set_state
 
 
@@ -39,7 +44,7 @@ class Graph:
 
     def __init__(self, tmp_path: Path):
         self.tmp_path = tmp_path
-        self.domain = next(_DOMAINS)
+        self.domain = fresh_domain()
         self.env = dict(os.environ, ROS_DOMAIN_ID=str(self.domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                         PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
         self.context = rclpy.Context()
@@ -79,17 +84,34 @@ class Graph:
             self.executor.spin_once(timeout_sec=0.05)
         return condition()
 
-    def call(self, client, request):
+    def call(self, client, request, resend=lambda: True):
+        """The answer to ``request``. DDS can lose a request or its response while the two processes
+        still discover each other (the client may see the service before the server sees the client's
+        response reader, or a participant of an earlier test on this domain may still be announced),
+        so an unanswered request is sent again every RESEND s while ``resend()`` says it should be."""
         assert self.spin_until(client.service_is_ready), f"{client.srv_name} never appeared"
-        future = client.call_async(request)
-        assert self.spin_until(future.done), f"no answer from {client.srv_name}"
-        return future.result()
+        deadline = time.monotonic() + WAIT
+        while True:
+            future = client.call_async(request)
+            if self.spin_until(future.done, timeout=RESEND):
+                return future.result()
+            client.remove_pending_request(future)
+            assert time.monotonic() < deadline, f"no answer from {client.srv_name}"
+            if not resend():
+                return None
 
     def state(self) -> str:
         return self.call(self._get, GetState.Request()).current_state.label
 
     def change(self, transition: int) -> bool:
-        return self.call(self._change, ChangeState.Request(transition=Transition(id=transition))).success
+        """Whether the transition succeeded. A transition is sent again only if the node is not
+        already in its goal state (its answer, not the request, may have been lost)."""
+        reached = []
+        def resend() -> bool:
+            reached.append(self.state() == GOAL[transition])
+            return not reached[-1]
+        answer = self.call(self._change, ChangeState.Request(transition=Transition(id=transition)), resend)
+        return answer.success if answer is not None else reached[-1]
 
     def hand_over(self) -> None:
         """A state on set_state (latched), stamped now: the estimator initialises from it when active."""

@@ -8,13 +8,13 @@
 The estimator as a separate process from its installed console script is in test_ros_colcon.py.
 """
 import math
-import os
-import random
 import threading
 import time
 
 import numpy as np
 import pytest
+
+from domains import fresh_domain
 
 rclpy = pytest.importorskip("rclpy")
 
@@ -36,14 +36,13 @@ from gpf_nav.ros.simulator_node import SimulatorNode  # noqa: E402
 from gpf_nav.scenario import ScenarioConfig, generate  # noqa: E402
 
 S = 1_000_000_000
-_DOMAINS = iter(random.Random(os.getpid() ^ time.time_ns()).sample(range(110, 230), 120))
 
 
 class Ros:
     """One private rclpy context on a fresh domain, an executor and a recording test node."""
 
     def __init__(self):
-        self.domain = next(_DOMAINS)
+        self.domain = fresh_domain()
         self.context = rclpy.Context()
         rclpy.init(args=[], context=self.context, domain_id=self.domain)
         self.executor = SingleThreadedExecutor(context=self.context)

@@ -4,7 +4,6 @@ ROS_DOMAIN_ID, localhost): the simulator's sensor suite fused with no refusal; a
 on every new topic refused, counted, its reason in /diagnostics, never a NaN out."""
 import math
 import os
-import random
 import signal
 import subprocess
 import sys
@@ -13,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from domains import fresh_domain
 
 rclpy = pytest.importorskip("rclpy")
 
@@ -33,7 +34,6 @@ from test_estimator_sensors import BAD, altitude_msg, position_msg, velocity_msg
 
 S = 1_000_000_000
 ROOT = Path(__file__).resolve().parents[1]
-_DOMAINS = iter(random.Random(os.getpid() ^ time.time_ns() ^ 0x18B).sample(range(110, 230), 20))
 NEW = ("position", "velocity", "altitude")
 
 
@@ -42,7 +42,7 @@ class Ros:
 
     def __init__(self):
         os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-        self.domain = next(_DOMAINS)
+        self.domain = fresh_domain()
         self.context = rclpy.Context()
         rclpy.init(args=[], context=self.context, domain_id=self.domain)
         self.executor = SingleThreadedExecutor(context=self.context)

@@ -4,7 +4,6 @@ status 0, no traceback, no ``KeyboardInterrupt``. Covers a signal to the process
 own) and SIGINT repeated while the node is shutting down. The simulator also exits 0 by itself at the
 end of its trajectory."""
 import os
-import random
 import signal
 import subprocess
 import sys
@@ -13,10 +12,11 @@ from pathlib import Path
 
 import pytest
 
+from domains import fresh_domain
+
 pytest.importorskip("rclpy")
 
 ROOT = Path(__file__).resolve().parents[1]
-_DOMAINS = iter(random.Random(os.getpid() ^ time.time_ns() ^ 0x51C).sample(range(110, 230), 20))
 MODULES = {"estimator": ("gpf_nav.ros.estimator_node", "estimator up"),
            "simulator": ("gpf_nav.ros.simulator_node", "lunar descent:")}
 HOW = {
@@ -39,7 +39,7 @@ def _repeat(proc: subprocess.Popen, sig: int, times: int = 30, gap: float = 0.01
 
 
 def _start(module: str, log: Path, *ros_args: str) -> subprocess.Popen:
-    env = dict(os.environ, ROS_DOMAIN_ID=str(next(_DOMAINS)), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+    env = dict(os.environ, ROS_DOMAIN_ID=str(fresh_domain()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
     args = [sys.executable, "-m", module] + (["--ros-args", *ros_args] if ros_args else [])
     with open(log, "w") as out:

@@ -2,23 +2,22 @@
 import json
 import math
 import os
-import random
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
 
+from domains import fresh_domain
+
 pytest.importorskip("rclpy")
 
 ROOT = Path(__file__).resolve().parents[1]
-_DOMAINS = iter(random.Random(os.getpid() ^ time.time_ns() ^ 0x5EED).sample(range(110, 230), 20))
 
 
 @pytest.fixture
 def private_domain(monkeypatch):
-    domain = next(_DOMAINS)
+    domain = fresh_domain()
     monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     return domain

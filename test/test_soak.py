@@ -2,15 +2,13 @@
 rates, on a private DDS domain. The full 30-minute figures are in docs/soak.md."""
 import json
 import math
-import os
-import random
-import time
 
 import pytest
 
+from domains import fresh_domain
+
 from gpf_nav.tools.soak import GARBAGE, STREAM_CATEGORIES, Ledger
 
-_DOMAINS = iter(random.Random(os.getpid() ^ time.time_ns() ^ 0x50A4).sample(range(110, 230), 10))
 S = 1_000_000_000
 
 
@@ -29,7 +27,7 @@ def test_ledger_predicts_the_estimator_timing_rules():
 
 def test_short_soak_accounts_for_every_message(monkeypatch, capsys):
     pytest.importorskip("rclpy")
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(next(_DOMAINS)))
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(fresh_domain()))
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     from gpf_nav.tools.soak import main
     code = main(["--sim-minutes", "3", "--rate-factor", "10", "--warmup", "60", "--seed", "0",
