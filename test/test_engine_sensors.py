@@ -6,8 +6,10 @@ import pytest
 
 from gpf_nav.estimator.engine import EngineConfig, EstimatorEngine
 from gpf_nav.estimator.factory import make_filter
+from gpf_nav.filters import SensorBiasFilter
 from gpf_nav.scenario import ScenarioConfig, filter_model, generate
 from gpf_nav.sensor_suite import SuiteConfig, generate_suite, suite_sensors
+from gpf_nav.sensors import Bias, PositionSensor
 
 S = 1_000_000_000
 T0 = 100 * S
@@ -104,6 +106,32 @@ def test_the_innovation_gate_refuses_an_outlier_then_yields_after_the_limit():
     assert engine.measurement(t + 3 * S, outlier, None, "position", sensors["position"]) == (True, "")
     assert engine.counters.rejected_by_stream[("position", "innovation_gate")] == 2
     assert np.all(np.isfinite(engine.mean))
+
+
+def test_the_gate_of_a_biased_sensor_subtracts_its_estimated_bias():
+    """The suite's TRN fixes offset by (300, -200, 100) m, 6 of their sigma, the offset estimated as a
+    bias of prior sigma 500 m (a consistent model, epsilon 0): the gate tests the innovation of the
+    biased prediction, with the bias sigma, so no fix is refused and the bias is learnt. Gated on the
+    user's state alone, at most one fix in gate_limit + 1 would pass."""
+    scenario = generate(ScenarioConfig(duration=200.0, epsilon=0.0), 3)
+    suite = generate_suite(scenario, SuiteConfig(trn_outlier_probability=0.0), 3)
+    model = filter_model(scenario.config)
+    trn = PositionSensor(suite.config.trn_noise_std, bias=Bias((500.0,) * 3, (np.inf,) * 3))
+    cfg = EngineConfig(initial_state=scenario.prior_mean, initial_std=np.sqrt(np.diag(scenario.prior_cov)),
+                       initial_stamp=T0 * 1e-9, gates={"position": 0.9999}, gate_limit=5)
+    engine = EstimatorEngine(lambda: SensorBiasFilter(lambda m: make_filter("ekf", m), model, [trn]),
+                             model, cfg, _Clock())
+    offset = np.array([300.0, -200.0, 100.0])
+    fixes = 0
+    for stamp, stream, y in _events(scenario, suite):
+        if stream == "rae":
+            assert engine.measurement(stamp, y, None) == (True, "")
+        elif stream == "position":
+            assert engine.measurement(stamp, y + offset, None, "position", trn) == (True, ""), fixes
+            fixes += 1
+    assert fixes >= 15 and engine.counters.rejected_by_stream[("position", "innovation_gate")] == 0
+    bias, sigma = engine.filter.sensor_bias("position")
+    assert np.all(np.abs(bias - offset) < 4.0 * sigma) and sigma.max() < 100.0, (bias, sigma)
 
 
 def test_a_sensor_measurement_does_not_initialise_from_data():

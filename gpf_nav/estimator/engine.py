@@ -8,7 +8,8 @@ of ROS time. Rules:
   the world-frame specific force of the latest IMU message stamped strictly before ``t`` (zero-order hold;
   none when there is no such sample within ``imu_timeout`` s before ``t``); ``sensor`` None is the model's
   own measurement (rae, range). A stream with a gate (``gates``) is first tested on the predicted estimate
-  (:func:`gpf_nav.sensors.innovation_distance`, chi-square): refused as ``innovation_gate`` (the filter
+  (:func:`gpf_nav.sensors.innovation_distance`, chi-square; with the sensor's estimated bias and its
+  sigma when it has bias states): refused as ``innovation_gate`` (the filter
   stays predicted to ``t``) unless ``gate_limit`` were refused in a row.
 * A measurement stamped before the filter's time, by at most ``history_length`` s, is fused at its own
   stamp: the filter is restored from the snapshot taken before the first input stamped after it (see
@@ -45,6 +46,7 @@ import numpy as np
 
 from scipy.stats import chi2
 
+from gpf_nav.filters import SensorBiasFilter
 from gpf_nav.integrity import CostateMonitor, IntegrityStatus
 from gpf_nav.estimator.history import Entry, History
 from gpf_nav.estimator.initialization import batch_initial_state
@@ -324,8 +326,11 @@ class EstimatorEngine:
         probability = self.config.gates.get(stream, 0.0)
         if sensor is None or probability <= 0.0:
             return False
-        d2, k = innovation_distance(sensor, y, self.filter.mean, self.filter.covariance,
-                                    getattr(self.filter, "time", 0.0))
+        if isinstance(self.filter, SensorBiasFilter):  # the sensor's estimated bias is part of its prediction
+            sensor, mean, cov = self.filter.predicted_estimate(sensor)
+        else:
+            mean, cov = self.filter.mean, self.filter.covariance
+        d2, k = innovation_distance(sensor, y, mean, cov, getattr(self.filter, "time", 0.0))
         if k == 0 or d2 <= _chi2_threshold(probability, k):
             self._streaks[stream] = 0
             return False

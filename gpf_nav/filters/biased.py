@@ -59,6 +59,11 @@ class SensorBiasFilter:
         """Condition on ``y`` of ``sensor`` (None: the model's own measurement, with its bias)."""
         self.filter.update(y, self.bias_model.lift(sensor))
 
+    def predicted_estimate(self, sensor: Sensor) -> tuple[Sensor, np.ndarray, np.ndarray]:
+        """``sensor`` on the augmented state with the augmented mean ``(n + n_b,)`` and covariance: what an
+        innovation test of ``sensor`` needs, its estimated bias subtracted and its bias sigma counted."""
+        return self.bias_model.lift(sensor), self.augmented_mean, self.augmented_covariance
+
     @property
     def augmented_mean(self) -> np.ndarray:
         """Mean ``(n + n_b,)`` of the user's state and the biases."""
