@@ -64,6 +64,9 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
     ``GeometricProjectionPF(model)`` is the navigation-grade configuration (cloud metric, exact weights,
     unmodelled-acceleration compensation). The paper's filter is
     ``GeometricProjectionPF(model, metric="euclidean", weighting="likelihood", unmodelled_acceleration_std=0)``.
+    The default estimator is not this class but :class:`~gpf_nav.filters.multiple_model.MultipleModelGPF`
+    (``make_filter("gpf", model)``, two of these filters): alone, the compensated filter can invent an
+    unobservable acceleration and diverge, e.g. with range only (docs/filters.md, *Robust by construction*).
 
     With compensation on, the filter runs on ``ModelErrorCompensation(model)``: :attr:`model` is that
     augmented model, :attr:`particles` are augmented ``(N, n + p)``, but :meth:`initialize` takes the
