@@ -91,3 +91,18 @@ def test_tempering_comparison_runs_every_variant(capsys):
     rows = [line for line in out.splitlines() if line.startswith("| single") or line.startswith("| multiple")]
     assert len(rows) == 2 * len(tempering.VARIANTS)
     assert "nan" not in " ".join(rows)
+
+
+def test_conditions_beyond_the_envelope_run_only_when_named(tmp_path):
+    """A combined condition is not in the default campaign, is accepted by name, and its scenario carries
+    every change it names (the mismatch of ``range-only-mismatch`` overrides ``--epsilon``)."""
+    assert not set(stress.BEYOND) & set(stress.CONDITIONS)
+    out = tmp_path / "beyond"
+    assert cli.main(["stress", "--workers", "1", "--prior-scales", "", "--filters", "ekf",
+                     "--conditions", "range-only-mismatch,dropouts", "--out", str(out)] + TINY) == 0
+    report = json.loads((out / "stress.json").read_text())
+    assert list(report["conditions"]) == ["range-only-mismatch", "dropouts"]
+    assert report["conditions"]["range-only-mismatch"]["changes"] == {"case": "range", "epsilon": 0.09}
+    assert report["conditions"]["dropouts"]["filters"]["EKF"]["runs"] == 2
+    with pytest.raises(SystemExit):
+        cli.main(["stress", "--conditions", "no-such-condition", "--out", str(out)] + TINY)

@@ -7,6 +7,10 @@ Conditions (each a change of the scenario, ``docs/scenario.md``; the truth flies
 * ``range-only``: azimuth and elevation never measured (``case: range``);
 * ``outliers``: 3 % of the measurement components are 20-sigma outliers;
 * ``range-bias``: a constant range bias of +2 sigma (60 m);
+* beyond the envelope, only when named in ``--conditions`` (:data:`BEYOND`): ``large-prior-range``,
+  ``large-prior-partial``, ``large-prior-mismatch`` (the large prior with range only, without azimuth,
+  or with the 9 % gravity mismatch), ``range-only-mismatch`` (range only, 9 % mismatch), ``dropouts``
+  (30 % of the measurement vectors lost) and ``noisy-outliers`` (noise x10 and 3 % outliers);
 * ``prior-x<s>``: the prior-size sweep, position sigma ``s`` km and velocity sigma ``s`` m/s for each
   ``s`` of ``--prior-scales`` (default 1, 3, 10; ``large-prior`` is the point ``s = 20``).
 
@@ -56,6 +60,18 @@ CONDITIONS = {
     "range-bias": ("constant range bias +2 sigma (60 m)", {"measurement_bias_sigma": (2.0, 0.0, 0.0)}),
 }
 """The fixed conditions: name -> (label, changes of the base scenario)."""
+_LARGE_PRIOR = CONDITIONS["large-prior"][1]
+BEYOND = {
+    "large-prior-range": ("large prior + range only", {**_LARGE_PRIOR, "case": "range"}),
+    "large-prior-partial": ("large prior + no azimuth", {**_LARGE_PRIOR, "case": "partial"}),
+    "large-prior-mismatch": ("large prior + 9 % gravity mismatch", {**_LARGE_PRIOR, "epsilon": 0.09}),
+    "range-only-mismatch": ("range only + 9 % gravity mismatch", {"case": "range", "epsilon": 0.09}),
+    "dropouts": ("30 % of measurements lost", {"dropout_probability": 0.3}),
+    "noisy-outliers": ("noise x10 + 3 % outliers at 20 sigma",
+                       {"measurement_noise_scale": 10.0, "outlier_probability": 0.03, "outlier_size": 20.0}),
+}
+"""Conditions beyond the envelope the default was built for (combinations), run only when named."""
+KNOWN = {**CONDITIONS, **BEYOND}
 
 
 def prior_condition(scale: float) -> tuple[str, tuple[str, dict]]:
@@ -66,7 +82,7 @@ def prior_condition(scale: float) -> tuple[str, tuple[str, dict]]:
 
 def conditions(names, prior_scales) -> dict:
     """``{name: (label, changes)}`` of the fixed conditions ``names`` and the prior-size sweep."""
-    out = {name: CONDITIONS[name] for name in names}
+    out = {name: KNOWN[name] for name in names}
     out.update(prior_condition(float(s)) for s in prior_scales)
     return out
 
@@ -205,7 +221,8 @@ def main(argv: list[str] | None = None) -> int:
                         help=f"comma-separated short names (default {DEFAULT_FILTERS}); known: "
                              + ", ".join(ALIASES))
     parser.add_argument("--conditions", default=",".join(CONDITIONS),
-                        help=f"comma-separated fixed conditions (default all: {', '.join(CONDITIONS)})")
+                        help=f"comma-separated fixed conditions (default: {', '.join(CONDITIONS)}; "
+                             f"beyond the envelope, when named: {', '.join(BEYOND)})")
     parser.add_argument("--prior-scales", default=",".join(f"{s:g}" for s in PRIOR_SCALES),
                         help="prior-size sweep: position sigma s km, velocity sigma s m/s per value "
                              "(default 1,3,10; empty: no sweep)")
@@ -220,9 +237,9 @@ def main(argv: list[str] | None = None) -> int:
         config = dataclasses.replace(base_config(args), epsilon=args.epsilon)
         filters = parse_filters(args.filters)
         names = [n.strip() for n in args.conditions.split(",") if n.strip()]
-        unknown = [n for n in names if n not in CONDITIONS]
+        unknown = [n for n in names if n not in KNOWN]
         if unknown:
-            raise ValueError(f"--conditions: unknown {unknown}; known: {', '.join(CONDITIONS)}")
+            raise ValueError(f"--conditions: unknown {unknown}; known: {', '.join(KNOWN)}")
         scales = [float(v) for v in args.prior_scales.split(",") if v.strip()]
         if not all(0.0 < v < math.inf for v in scales):
             raise ValueError(f"--prior-scales must be positive numbers, got {args.prior_scales!r}")
