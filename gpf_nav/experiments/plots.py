@@ -236,7 +236,7 @@ def sweep(values: np.ndarray, tables: dict, param_label: str, runs: int, path: P
 
 def stress(conditions: dict, prior: list, runs: int, path: Path) -> Path:
     """The stress campaign: mean position RMSE (bars; dots: median) and mean NEES per condition and
-    filter, and the mean position RMSE against the prior size.
+    filter, and the mean position RMSE against the prior size (a third panel, only with a sweep).
 
     ``conditions[name] = (label, {filter: row})`` and ``prior = [(scale, {filter: row}), ...]`` with the
     rows of :func:`gpf_nav.experiments.stress.summarise` (metres).
@@ -244,8 +244,9 @@ def stress(conditions: dict, prior: list, runs: int, path: Path) -> Path:
     plt = _pyplot()
     names = list(conditions)
     filters = list(next(iter(conditions.values()))[1])
-    fig, axes = plt.subplots(1, 3, figsize=(21.0, 5.2), layout="constrained",
-                             gridspec_kw={"width_ratios": [2.2, 2.2, 1.2]})
+    ratios = [2.2, 2.2, 1.2] if prior else [2.2, 2.2]
+    fig, axes = plt.subplots(1, len(ratios), figsize=(21.0 * sum(ratios) / 5.6, 5.2), layout="constrained",
+                             gridspec_kw={"width_ratios": ratios})
     width = 0.8 / len(filters)
     x = np.arange(len(names))
 
@@ -270,12 +271,13 @@ def stress(conditions: dict, prior: list, runs: int, path: Path) -> Path:
         ax.grid(True, which="both", axis="y", alpha=0.3)
     axes[1].axhspan(2.0, 15.0, color="0.85", zorder=0, label="2-15")
     axes[1].axhline(6.0, color="k", ls=":", lw=0.8)
-    axes[2].set_xscale("log")
-    axes[2].set_yscale("log")
-    axes[2].set_xlabel("prior size s: position sigma s km, velocity sigma s m/s")
-    axes[2].set_ylabel("mean position RMSE (m)")
-    axes[2].set_title("prior-size sweep", fontsize=10)
-    axes[2].grid(True, which="both", alpha=0.3)
+    if prior:
+        axes[2].set_xscale("log")
+        axes[2].set_yscale("log")
+        axes[2].set_xlabel("prior size s: position sigma s km, velocity sigma s m/s")
+        axes[2].set_ylabel("mean position RMSE (m)")
+        axes[2].set_title("prior-size sweep", fontsize=10)
+        axes[2].grid(True, which="both", alpha=0.3)
     _shared_legend(fig, axes[0], columns=len(filters))
     fig.suptitle(f"Stress campaign: {runs} runs per condition, the same runs for every filter "
                  f"(NEES: grey band 2-15, dotted line 6)")
