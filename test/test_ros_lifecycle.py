@@ -3,7 +3,12 @@
 ``lifecycle_msgs`` services (``~/change_state``, ``~/get_state``). Also TF on ``/tf`` checked by a real
 subscriber, with ``tf2_msgs`` built from its definition (test/interfaces.py), and the one warning that
 names an undeclared parameter. Conditions are awaited; "publishes nothing" is judged by the stamps
-(the node stamps its predictions with its clock), not by how long we listened."""
+(the node stamps its predictions with its clock), not by how long we listened.
+
+A prior (``set_state``), a pose or a ``~/reset`` that reaches the node while it is not active is kept and
+applied at ``activate``; measurements that arrive then are counted, not processed. With the simulator
+already running (its latched prior sent long before) and ``autostart:=false``, odometry flows as soon as
+a manager activates the estimator, not after the ``init_window`` measurements (20 s) it waited for before."""
 import os
 import subprocess
 import sys
@@ -17,11 +22,14 @@ from domains import fresh_domain
 rclpy = pytest.importorskip("rclpy")
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import Vector3Stamped  # noqa: E402
 from lifecycle_msgs.msg import Transition  # noqa: E402
 from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
 from nav_msgs.msg import Odometry  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from rclpy.qos import qos_profile_sensor_data  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
 
 import interfaces  # noqa: E402
 from gpf_nav.ros import conversions as conv  # noqa: E402
@@ -54,19 +62,24 @@ class Graph:
         self.executor.add_node(self.node)
         self.odometry: list = []
         self.diagnostics: list = []
+        self.rae: list = []
         self.node.create_subscription(Odometry, "odometry/filtered", self.odometry.append, 1000)
+        self.node.create_subscription(Vector3Stamped, "measurements/rae", self.rae.append, qos_profile_sensor_data)
+        self._rae = self.node.create_publisher(Vector3Stamped, "measurements/rae", qos_profile_sensor_data)
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self.diagnostics.append, 100)
         latched = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=1,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._set_state = self.node.create_publisher(Odometry, "set_state", latched)
         self._change = self.node.create_client(ChangeState, f"{NODE}/change_state")
         self._get = self.node.create_client(GetState, f"{NODE}/get_state")
+        self._reset = self.node.create_client(Trigger, f"{NODE}/reset")
         self.procs: list[tuple[subprocess.Popen, Path]] = []
 
-    def start(self, *ros_args: str, env: dict | None = None) -> tuple[subprocess.Popen, Path]:
-        log = self.tmp_path / f"estimator{len(self.procs)}.log"
+    def start(self, *ros_args: str, env: dict | None = None,
+              module: str = "gpf_nav.ros.estimator_node") -> tuple[subprocess.Popen, Path]:
+        log = self.tmp_path / f"{module.rsplit('.', 1)[-1]}{len(self.procs)}.log"
         with open(log, "w") as out:
-            proc = subprocess.Popen([sys.executable, "-m", "gpf_nav.ros.estimator_node", "--ros-args", *ros_args],
+            proc = subprocess.Popen([sys.executable, "-m", module, "--ros-args", *ros_args],
                                     env=env or self.env, cwd=self.tmp_path, stdout=out, stderr=subprocess.STDOUT)
         self.procs.append((proc, log))
         return proc, log
@@ -119,6 +132,17 @@ class Graph:
         self._set_state.publish(conv.odometry_msg(np.array(STATE), np.diag([1e6, 1e6, 1e6, 1.0, 1.0, 1.0]),
                                                   self.now_ns(), "moon_inertial", "base_link"))
 
+    def measure(self) -> None:
+        """One rae measurement (best effort, as sensors publish), stamped now, of the handed-over state."""
+        msg = Vector3Stamped()
+        msg.header.stamp = conv.ns_to_stamp(self.now_ns())
+        msg.header.frame_id = "station"
+        msg.vector.x, msg.vector.y, msg.vector.z = 1.8e6, 0.0, 0.0
+        self._rae.publish(msg)
+
+    def reset(self) -> str:
+        return self.call(self._reset, Trigger.Request()).message
+
     def odometry_after(self, t_ns: int) -> list:
         return [m for m in self.odometry if conv.stamp_to_ns(m.header.stamp) > t_ns]
 
@@ -166,17 +190,27 @@ def test_lifecycle_transitions_through_the_standard_services(graph):
     assert graph.change(Transition.TRANSITION_CONFIGURE)
     assert graph.state() == "inactive"
     assert graph.spin_until(lambda: graph.node.count_publishers("odometry/filtered") == 1)
-    graph.spin_until(lambda: graph.odometry, timeout=2.0)
+    # the latched prior (sent while unconfigured) reaches the configured node: kept, not applied yet
+    assert graph.spin_until(lambda: "keeping the set_state message" in log.read_text()), log.read_text()
+    # measurements while inactive: counted, not processed (best effort: sent until one got through;
+    # the count is read from /diagnostics once active)
+    assert graph.spin_until(lambda: graph.node.count_subscribers("measurements/rae") >= 1)
+    for _ in range(20):
+        graph.measure()
+        graph.spin_until(lambda: False, timeout=0.1)
     assert not graph.odometry and not graph.diagnostics  # configured but inactive: still nothing
 
     assert graph.change(Transition.TRANSITION_ACTIVATE)
     assert graph.state() == "active"
-    graph.hand_over()  # the latched one arrived while inactive: counted, not processed
+    # no second hand-over: the prior kept while inactive initialises the filter at activation
     assert graph.spin_until(lambda: len(graph.odometry_after(start)) >= 5), "no odometry once active"
     assert graph.spin_until(lambda: graph.status().get("initialized") == "true")
     status = graph.status()
-    assert int(status["messages ignored while inactive"]) >= 1
+    assert status["initialized from"] == "set_state" and int(status["accepted set_state"]) == 1, status
+    assert int(status["messages ignored while inactive"]) >= 1, status
+    assert int(status.get("accepted rae", 0)) == 0 and status["messages rejected"] == "0", status
     assert status["tf"].startswith("not published: ") or status["tf"] == "moon_inertial -> base_link on /tf"
+    assert "applying the set_state message received while inactive" in log.read_text()
 
     assert graph.change(Transition.TRANSITION_DEACTIVATE)
     stopped = graph.now_ns()  # after the answer: anything stamped later was published while inactive
@@ -184,9 +218,14 @@ def test_lifecycle_transitions_through_the_standard_services(graph):
     graph.spin_until(lambda: graph.odometry_after(stopped), timeout=3.0)
     assert not graph.odometry_after(stopped), "odometry while inactive"
 
+    # inactive: a reset, then a new prior; the newest (the prior) is kept and applied at activation
+    assert graph.reset() == "inactive: the filter resets when the node activates"
+    graph.hand_over()
+    assert graph.spin_until(lambda: "it replaces the ~/reset request kept before" in log.read_text()), log.read_text()
     assert graph.change(Transition.TRANSITION_ACTIVATE)
     resumed = graph.now_ns()
     assert graph.spin_until(lambda: len(graph.odometry_after(resumed)) >= 3), "no odometry after re-activation"
+    assert graph.spin_until(lambda: int(graph.status().get("accepted set_state", 0)) == 2), graph.status()
 
     assert graph.change(Transition.TRANSITION_DEACTIVATE)
     assert graph.change(Transition.TRANSITION_CLEANUP)
@@ -259,3 +298,32 @@ def test_tf_with_every_odometry_message_received_by_a_subscriber(graph, tf2_msgs
         assert t.transform.rotation.w == 1.0
     assert matched >= 15, (matched, len(graph.odometry), len(transforms))
     assert "no TF is published" not in log.read_text()
+
+
+def test_with_the_simulator_already_running_odometry_flows_at_activation(graph):
+    """nav2's set-up (docs/ros.md, Lifecycle): the simulator runs and has handed its prior over (latched)
+    long before a manager configures and activates the estimator. The prior reaches the node at
+    ``configure`` and is applied at ``activate``: the first odometry comes before the second measurement
+    stamped after activation (measurements are 2 s apart), not after the ``init_window`` (10) measurements
+    the filter would otherwise wait for. Judged by the messages' stamps, all on the wall clock (the
+    simulator's time starts at the wall-clock time); the wall time is printed."""
+    graph.start("-p", "start_delay:=0.5", module="gpf_nav.ros.simulator_node")
+    assert graph.spin_until(lambda: len(graph.rae) >= 1), "no measurement from the simulator"
+    proc, log = graph.start("-p", "autostart:=false")
+    assert graph.state() == "unconfigured"
+    assert graph.change(Transition.TRANSITION_CONFIGURE)
+    assert graph.spin_until(lambda: "keeping the set_state message" in log.read_text()), log.read_text()
+    activating = graph.now_ns()
+    wall = time.monotonic()
+    assert graph.change(Transition.TRANSITION_ACTIVATE)
+    assert graph.spin_until(lambda: graph.odometry_after(activating)), log.read_text()
+    first_wall = time.monotonic() - wall
+    first = min(conv.stamp_to_ns(m.header.stamp) for m in graph.odometry_after(activating))
+    later = lambda: sorted(s for s in (conv.stamp_to_ns(m.header.stamp) for m in graph.rae) if s > activating)  # noqa: E731
+    assert graph.spin_until(lambda: len(later()) >= 2), "the simulator stopped measuring"
+    assert first < later()[1], (f"first odometry {(first - activating) * 1e-9:.2f} s after activation, after the "
+                                f"second measurement ({(later()[1] - activating) * 1e-9:.2f} s)", log.read_text())
+    assert graph.spin_until(lambda: graph.status().get("initialized from") == "set_state"), graph.status()
+    assert "applying the set_state message received while inactive" in log.read_text()
+    print(f"first odometry stamped {(first - activating) * 1e-9:.2f} s after the activate request; "
+          f"received {first_wall:.2f} s (wall) after it")

@@ -8,6 +8,7 @@ No parameter may be changed at run time except those marked ``live``. No ROS her
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 
 from gpf_nav.models.lunar import MU_MOON
@@ -225,29 +226,87 @@ IGNORED_OFFLINE = ("use_sim_time",)
 """Parameters a params file may set for a node that mean nothing without one (accepted, not used)."""
 
 
+def section_matches(key: str, fully_qualified_name: str) -> bool:
+    """Whether the params-file section ``key`` applies to the node ``fully_qualified_name``, by rcl's rules:
+    a key without a leading ``/`` is taken from the root (``gpf_estimator`` is ``/gpf_estimator`` and does
+    not match ``/lander/gpf_estimator``); a ``*`` level stands for any one name (rcl refuses
+    other uses of ``*``); a ``**`` level for any number of levels, none included (``/**`` matches every node, ``/**/gpf_estimator`` the node of that
+    name in any namespace)."""
+    key = "/" + str(key).lstrip("/")
+    parts = []
+    for token in key.strip("/").split("/"):
+        if token == "**":
+            parts.append("(?:/[^/]+)*")
+        else:
+            parts.append("/[^/]+" if token == "*" else "/" + re.escape(token))
+    return re.fullmatch("".join(parts), "/" + fully_qualified_name.strip("/")) is not None
+
+
+def read_params_file(path) -> dict:
+    """``{node key: ros__parameters mapping}`` of the ROS 2 params file ``path``, node names nested as rcl
+    allows (``lander: gpf_estimator: ros__parameters:`` is the key ``lander/gpf_estimator``). A file that is
+    missing, unreadable, not YAML or not laid out so raises :class:`ParameterError`, one line naming it."""
+    import yaml
+    try:
+        with open(path) as f:
+            document = yaml.safe_load(f)
+    except OSError as err:
+        raise ParameterError(f"params file {path}: {err.strerror or err}") from None
+    except yaml.YAMLError as err:
+        raise ParameterError(f"params file {path} is not valid YAML: {' '.join(str(err).split())}") from None
+    sections: dict = {}
+
+    def walk(tree, key: str) -> None:
+        if not isinstance(tree, dict):
+            where = f"under '{key}'" if key else "at the top"
+            raise ParameterError(f"params file {path}: expected node names {where} ('/**/<node>: ros__parameters: "
+                                 f"...'), found {type(tree).__name__} {tree!r:.60}")
+        if "ros__parameters" in tree:
+            values = tree["ros__parameters"]
+            if not key or not isinstance(values, (dict, type(None))):
+                raise ParameterError(f"params file {path}: expected '<node>: ros__parameters: <mapping>' at "
+                                     f"'{key or 'the top'}'")
+            sections[key] = values or {}
+            return
+        for name, sub in tree.items():
+            walk(sub, f"{key}/{name}" if key else str(name))
+
+    if document is not None:
+        walk(document, "")
+    return sections
+
+
+def unmatched_sections(sections: dict, fully_qualified_name: str) -> list[str] | None:
+    """The node keys of a params file (:func:`read_params_file`) that name the node (``.../<its name>``)
+    without applying to it, or None when no such key exists and some key applies. An empty list: no key
+    at all applies to the node, and none names it. Used to warn that a file gives the node nothing."""
+    name = fully_qualified_name.rstrip("/").rsplit("/", 1)[-1]
+    keys = [str(k) for k in sections]
+    applying = [k for k in keys if section_matches(k, fully_qualified_name)]
+    named = [k for k in keys if k.rstrip("/").rsplit("/", 1)[-1] == name]
+    if any(k in applying for k in named):
+        return None
+    if named:
+        return named
+    return None if applying else []
+
+
 def parameters_from_files(specs: list[Spec], node_name: str, params_files=(), assignments=()) -> dict:
-    """``{name: value}`` of ``specs`` without a node: defaults, then each ROS 2 params file in turn (the
-    sections ``/**``, ``node_name`` and ``/node_name``, nested names joined with ``.``), then each
-    ``name:=value`` assignment (value parsed as YAML, as ``--ros-args -p`` does). Values are coerced as
+    """``{name: value}`` of ``specs`` without a node: defaults, then each ROS 2 params file in turn (every
+    section that applies to the node ``/node_name``, by :func:`section_matches`: ``/**``,
+    ``/**/node_name``, ``node_name``, ...; nested names joined with ``.``), then each ``name:=value``
+    assignment (value parsed as YAML, as ``--ros-args -p`` does). Values are coerced as
     :func:`gpf_nav.ros.parameters.declare` does; an unknown name or a malformed file raises
     :class:`ParameterError`."""
     import yaml
     known = {spec.name: spec for spec in specs}
     given: dict = {}
     for path in params_files:
-        try:
-            with open(path) as f:
-                document = yaml.safe_load(f) or {}
-        except (OSError, yaml.YAMLError) as err:
-            raise ParameterError(f"params file {path}: {err}".replace("\n", " ")) from None
-        sections = [document[k] for k in ("/**", node_name, "/" + node_name)
-                    if isinstance(document, dict) and k in document]
+        sections = [section for key, section in read_params_file(path).items() if section_matches(key, node_name)]
         if not sections:
-            raise ParameterError(f"params file {path} has no section for {node_name} (nor /**)")
+            raise ParameterError(f"params file {path} has no section for {node_name} (nor /**, /**/{node_name})")
         for section in sections:
-            if not isinstance(section, dict) or not isinstance(section.get("ros__parameters"), dict):
-                raise ParameterError(f"params file {path}: expected '{node_name}: ros__parameters: ...'")
-            given.update(_flatten(section["ros__parameters"]))
+            given.update(_flatten(section))
     for text in assignments:
         name, sep, value = text.partition(":=")
         if not sep or not name:

@@ -8,8 +8,11 @@ Lifecycle (``rclpy.lifecycle``, nav2's semantics; the standard ``lifecycle_msgs`
 
 * ``configure`` builds the model, the filter and every topic from the parameters; an invalid value
   makes it fail with the reason, and the node stays ``unconfigured``;
-* ``activate`` starts processing and publishing; ``deactivate`` stops both (messages that arrive
+* ``activate`` starts processing and publishing; ``deactivate`` stops both (measurements that arrive
   while inactive are counted, not processed); the filter keeps its state in between;
+* a ``set_state``, ``set_pose`` or ``~/reset`` that arrives while the node is configured but inactive
+  (the latched prior delivered at ``configure``, typically) is kept, the newest one, and applied at
+  ``activate``;
 * ``cleanup`` drops the filter and the topics; ``shutdown`` is clean from any state.
 
 ``autostart`` (default true) runs configure and activate at start-up, so the node with no
@@ -46,7 +49,7 @@ from gpf_nav.estimator.params import ESTIMATOR, ParameterError
 from gpf_nav.ros import conversions as conv
 from gpf_nav.ros import shutdown
 from gpf_nav.ros.estimator_core import INPUT_TOPICS, OUTPUT_TOPICS, EstimatorCore
-from gpf_nav.ros.parameters import declare, warn_undeclared
+from gpf_nav.ros.parameters import declare, params_files, warn_undeclared, warn_unmatched_params_files
 
 try:
     from tf2_msgs.msg import TFMessage
@@ -60,6 +63,8 @@ TF_TOPIC = "/tf"
 TF_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=100,
                     durability=DurabilityPolicy.VOLATILE)
 """tf2_ros's TransformBroadcaster QoS (its DynamicBroadcasterQoS)."""
+INITIALISING = ("set_state", "set_pose")
+"""Streams that (re-)initialise the filter: kept while inactive (the newest, with ~/reset), applied at activate."""
 LIVE = {"ess_warn_threshold": "ess_warn", "costate_warn_threshold": "costate_warn",
         "sensor_timeout": "sensor_timeout"}
 """Live parameter -> attribute of the core's diagnostics thresholds."""
@@ -67,17 +72,20 @@ LIVE = {"ess_warn_threshold": "ess_warn", "costate_warn_threshold": "costate_war
 
 class EstimatorNode(LifecycleNode):
     """The ``gpf_estimator`` node. With ``autostart`` (the default) it is active when the constructor
-    returns, and raises :class:`ParameterError` on invalid parameters."""
+    returns, and raises :class:`ParameterError` on invalid parameters. ``params_files``: the
+    ``--params-file`` paths of the command line; one that sets nothing for this node is warned about."""
 
-    def __init__(self, name: str = NODE_NAME, **kwargs):
+    def __init__(self, name: str = NODE_NAME, params_files=(), **kwargs):
         super().__init__(name, **kwargs)
         self.params = declare(self, ESTIMATOR)
         warn_undeclared(self)
+        warn_unmatched_params_files(self, params_files)
         self.core: EstimatorCore | None = None
         self.engine = None
         self.active = False
         self.finalized = False                  # after the shutdown transition: main() then exits 0
         self.ignored: Counter[str] = Counter()  # messages received while configured but inactive
+        self.pending: tuple[str, object] | None = None  # newest set_state / set_pose / reset while inactive
         self._entities: list = []               # (destroy, entity): subscriptions, timers, service of configure
         self._publishers_by_topic: dict = {}
         self._tf_publisher = None
@@ -109,11 +117,19 @@ class EstimatorNode(LifecycleNode):
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         result = super().on_activate(state)  # enables the lifecycle publishers
-        self.active = True
         waiting = sum(self.ignored.values())
         self.get_logger().info("active: processing and publishing" + (
             f" ({waiting} messages that arrived while inactive were not processed: {_counts(self.ignored)})"
             if waiting else ""))
+        if self.pending is not None:
+            kind, msg = self.pending
+            self.pending = None
+            self.get_logger().info(f"applying the {_kind(kind)} received while inactive")
+            if kind == "reset":
+                self.get_logger().info(self.core.reset())
+            else:
+                self.core.handle(kind, msg, self._now_ns())
+        self.active = True
         return result
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -130,6 +146,7 @@ class EstimatorNode(LifecycleNode):
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
         self.active = False
+        self.pending = None
         self._release()
         self.finalized = True
         self.get_logger().info("shut down (finalized)")
@@ -215,9 +232,21 @@ class EstimatorNode(LifecycleNode):
         def on_message(msg) -> None:
             if self.active:
                 self.core.handle(stream, msg, self._now_ns())
+            elif stream in INITIALISING:
+                self._keep(stream, msg)
             else:
                 self.ignored[stream] += 1
         return on_message
+
+    def _keep(self, kind: str, msg) -> None:
+        """Keep ``kind`` (a stream of INITIALISING or ``reset``) until activation; it replaces (and
+        counts as not processed) the one kept before."""
+        replaced = self.pending
+        if replaced is not None:
+            self.ignored[replaced[0]] += 1
+        self.pending = (kind, msg)
+        self.get_logger().info(f"inactive: keeping the {_kind(kind)} received now; it is applied at activation"
+                               + (f" (it replaces the {_kind(replaced[0])} kept before)" if replaced else ""))
 
     def _publish(self, topic: str, msg) -> None:
         if topic == "/diagnostics":
@@ -240,6 +269,10 @@ class EstimatorNode(LifecycleNode):
 
     def _on_reset(self, request, response):
         response.success = True
+        if not self.active:
+            self._keep("reset", None)
+            response.message = "inactive: the filter resets when the node activates"
+            return response
         response.message = self.core.reset()
         self.get_logger().info(response.message)
         return response
@@ -254,6 +287,10 @@ class EstimatorNode(LifecycleNode):
                                        self.get_fully_qualified_name())
 
 
+def _kind(kind: str) -> str:
+    return "~/reset request" if kind == "reset" else f"{kind} message"
+
+
 def _counts(counter: Counter) -> str:
     return ", ".join(f"{stream} {n}" for stream, n in sorted(counter.items()))
 
@@ -264,9 +301,12 @@ def main(argv: list[str] | None = None) -> int:
     shutdown transition."""
     retain_freed_memory()
     limit_blas_threads()
-    stop = shutdown.init_without_signal_handlers(sys.argv if argv is None else argv)
+    argv = sys.argv if argv is None else argv
+    stop = shutdown.start("estimator", argv)
+    if stop is None:
+        return 2
     try:
-        node = EstimatorNode()
+        node = EstimatorNode(params_files=params_files(argv))
     except (ParameterError, rclpy.exceptions.InvalidParameterTypeException,
             rclpy.exceptions.InvalidParameterValueException) as err:
         rclpy.logging.get_logger(NODE_NAME).fatal(f"refusing to start: {err}")

@@ -1,5 +1,6 @@
-"""Declare a parameter table of :mod:`gpf_nav.estimator.params` on an rclpy node, and warn about
-the parameters a node was given but does not declare.
+"""Declare a parameter table of :mod:`gpf_nav.estimator.params` on an rclpy node, warn about the
+parameters a node was given but does not declare and about params files none of whose sections applies
+to the node, and check the params files of a command line before ``rclpy.init`` reads them.
 
 Numbers are declared with dynamic typing, so ``1`` in a YAML file is accepted for a float; every value is
 returned coerced to its default's type (:func:`gpf_nav.estimator.params.coerce`).
@@ -9,7 +10,7 @@ from __future__ import annotations
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.exceptions import ParameterUninitializedException
 
-from gpf_nav.estimator.params import Spec, coerce
+from gpf_nav.estimator.params import ParameterError, Spec, coerce, read_params_file, unmatched_sections
 
 
 def declare(node, specs: list[Spec]) -> dict:
@@ -29,6 +30,53 @@ def declare(node, specs: list[Spec]) -> dict:
             value = node.declare_parameter(spec.name, spec.default, descriptor).value
         values[spec.name] = coerce(spec, value)
     return values
+
+
+def params_files(argv) -> list[str]:
+    """The ``--params-file PATH`` arguments of the ``--ros-args`` parts of ``argv``, in order."""
+    files, in_ros_args, args = [], False, list(argv)
+    for i, arg in enumerate(args):
+        if arg == "--ros-args":
+            in_ros_args = True
+        elif arg == "--":
+            in_ros_args = False
+        elif in_ros_args and arg == "--params-file" and i + 1 < len(args):
+            files.append(args[i + 1])
+        elif in_ros_args and arg.startswith("--params-file="):
+            files.append(arg.partition("=")[2])
+    return files
+
+
+def params_file_error(argv) -> str | None:
+    """One line naming the first params file of ``argv`` that is missing, unreadable or not a YAML
+    mapping, or None. rcl would otherwise fail inside ``rclpy.init`` with a traceback."""
+    for path in params_files(argv):
+        try:
+            read_params_file(path)
+        except ParameterError as err:
+            return str(err)
+    return None
+
+
+def warn_unmatched_params_files(node, files) -> list[str]:
+    """One warning line per params file in ``files`` that gives ``node`` nothing because its sections are
+    written for another namespace (``gpf_estimator:`` is ``/gpf_estimator``, not
+    ``/lander/gpf_estimator``) or for other nodes only; returns the files warned about."""
+    fqn, warned = node.get_fully_qualified_name(), []
+    for path in files:
+        try:
+            sections = read_params_file(path)
+        except ParameterError:
+            continue  # main() refuses these before rclpy.init
+        named = unmatched_sections(sections, fqn)
+        if named is None:
+            continue
+        listed = ", ".join(repr(str(k)) for k in (named or sections)) or "none"
+        node.get_logger().warning(
+            f"params file {path} sets nothing for {fqn}: no section applies to it (sections: {listed}); "
+            f"write '/**/{node.get_name()}:' to match the node in any namespace (docs/ros.md, Parameters)")
+        warned.append(str(path))
+    return warned
 
 
 def warn_undeclared(node) -> list[str]:

@@ -47,6 +47,26 @@ def init_without_signal_handlers(args: list[str]) -> StopRequest:
     return stop
 
 
+def start(program: str, args: list[str]) -> StopRequest | None:
+    """:func:`init_without_signal_handlers` for a console script, after checking the params files of
+    ``args``: a missing, unreadable or malformed params file (or any argument rcl cannot parse) gives one
+    line on stderr, ``<program>: error: ...`` naming it, and None; the script then exits with status 2."""
+    import sys
+
+    from rclpy.impl.implementation_singleton import rclpy_implementation
+
+    from gpf_nav.ros.parameters import params_file_error
+
+    problem = params_file_error(args)
+    if problem is None:
+        try:
+            return init_without_signal_handlers(args)
+        except rclpy_implementation.RCLError as err:  # rcl's argument or params-file parser
+            problem = "cannot start with these arguments: " + " ".join(str(err).split())
+    print(f"{program}: error: {problem}", file=sys.stderr)
+    return None
+
+
 def spin_until(node, stop: StopRequest, done: Callable[[], bool] = lambda: False, period: float = 0.1) -> None:
     """Spin ``node`` until a stop is requested, ``done()`` is true or the context is shut down."""
     import rclpy

@@ -32,7 +32,7 @@ from sensor_msgs.msg import Imu, Range
 from gpf_nav.ros import conversions as conv
 from gpf_nav.ros import shutdown
 from gpf_nav.estimator.params import ParameterError, simulator_specs
-from gpf_nav.ros.parameters import declare, warn_undeclared
+from gpf_nav.ros.parameters import declare, params_files, warn_undeclared, warn_unmatched_params_files
 from gpf_nav.playback import NS, build_events
 
 NODE_NAME = "lunar_simulator"
@@ -158,10 +158,11 @@ class SimulatorNode(Node):
             ``altitude``, ``velocity``, ``position``).
     """
 
-    def __init__(self, name: str = NODE_NAME, **kwargs):
+    def __init__(self, name: str = NODE_NAME, params_files=(), **kwargs):
         super().__init__(name, **kwargs)
         p = self.params = declare(self, simulator_specs())
         warn_undeclared(self)
+        warn_unmatched_params_files(self, params_files)
         errors = check_simulator_parameters(p)
         if not errors:
             try:
@@ -259,9 +260,12 @@ class SimulatorNode(Node):
 def main(argv: list[str] | None = None) -> int:
     """Console script ``simulator``: exits 0 at the end of the trajectory (unless ``loop``) and when
     stopped by SIGINT or SIGTERM (:mod:`gpf_nav.ros.shutdown`), 2 on invalid parameters."""
-    stop = shutdown.init_without_signal_handlers(sys.argv if argv is None else argv)
+    argv = sys.argv if argv is None else argv
+    stop = shutdown.start("simulator", argv)
+    if stop is None:
+        return 2
     try:
-        node = SimulatorNode()
+        node = SimulatorNode(params_files=params_files(argv))
     except (ParameterError, rclpy.exceptions.InvalidParameterTypeException,
             rclpy.exceptions.InvalidParameterValueException) as err:
         rclpy.logging.get_logger(NODE_NAME).fatal(f"refusing to start: {err}")
