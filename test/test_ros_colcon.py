@@ -5,6 +5,8 @@ workspace, and the installed console scripts run as separate processes over DDS:
   (what ``ros2 run`` looks for), the ament index marker and ``share/gpf_nav/{config,launch}``, and
   ``source install/setup.bash`` puts the package on the paths; ``--symlink-install`` gives the same layout;
 * the installed ``estimator`` refuses ``filter:=bogus`` with a clear FATAL line and exit code 2;
+* the installed ``gpf-nav`` runs from ``lib/gpf_nav`` (``ros2 run gpf_nav gpf-nav``), and the installed
+  scripts refuse a missing params file in one line with exit code 2;
 * the installed ``simulator`` and ``estimator`` run as two processes (``use_sim_time``) while this test
   subscribes to ``odometry/filtered`` and ``truth/odometry`` and checks the error is bounded.
 Skipped only when colcon is not importable (CI installs it).
@@ -111,6 +113,31 @@ def test_installed_estimator_refuses_bad_parameters(workspace):
     assert result.returncode == 2, result.stderr
     assert "refusing to start" in result.stderr
     assert "'filter' = 'bogus' is not a known filter; choose one of gpf, gpf-single, gpf-mm, spf, ekf, ukf, enkf" in result.stderr
+
+
+def test_installed_gpf_nav_runs_where_ros2_run_finds_it(workspace):
+    """``ros2 run gpf_nav gpf-nav ...`` runs ``lib/gpf_nav/gpf-nav`` (colcon puts no bin/ on PATH)."""
+    script = workspace / "install" / "gpf_nav" / "lib" / "gpf_nav" / "gpf-nav"
+    env = _installed_env(workspace, 0)
+    result = subprocess.run([str(script), "--help"], env=env, cwd=workspace, capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 0 and "gpf-nav demo" in result.stdout, result.stderr
+    result = subprocess.run([str(script), "nosuch"], env=env, cwd=workspace, capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 2 and "unknown command 'nosuch'" in result.stderr, result.stderr
+
+
+@pytest.mark.parametrize("program", ["estimator", "simulator", "gpf-nav"])
+def test_installed_scripts_refuse_a_missing_params_file_in_one_line(workspace, program):
+    script = workspace / "install" / "gpf_nav" / "lib" / "gpf_nav" / program
+    missing = workspace / "missing.yaml"
+    args = ["replay", "nobag", "--out", "out", "--params-file"] if program == "gpf-nav" else ["--ros-args",
+                                                                                                "--params-file"]
+    result = subprocess.run([str(script), *args, str(missing)], env=_installed_env(workspace, 0), cwd=workspace,
+                            capture_output=True, text=True, timeout=120)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1, (result.returncode, result.stdout, result.stderr)
+    assert f"params file {missing}: No such file or directory" in lines[0], lines
 
 
 def test_installed_simulator_and_estimator_processes_track_truth(workspace):
