@@ -96,12 +96,16 @@ LAUNCH_ARGUMENTS = {"params_file", "namespace", "use_sim_time", "log_level", "au
 
 
 def test_launch_file_declares_its_arguments_statically():
-    """Without launch: the DeclareLaunchArgument names in the file's source."""
+    """Without launch: the file declares one DeclareLaunchArgument per entry of
+    gpf_nav.ros.launch_arguments.ARGUMENTS (test/test_launch_arguments.py tests that table)."""
     import ast
+
+    from gpf_nav.ros.launch_arguments import ARGUMENTS
+    assert {a.name for a in ARGUMENTS} == LAUNCH_ARGUMENTS
     tree = ast.parse((ROOT / "launch" / "gpf_nav.launch.py").read_text())
-    names = {node.args[0].value for node in ast.walk(tree) if isinstance(node, ast.Call)
-             and getattr(node.func, "id", "") == "DeclareLaunchArgument"}
-    assert names == LAUNCH_ARGUMENTS
+    loops = [node for node in ast.walk(tree) if isinstance(node, ast.ListComp)
+             and isinstance(node.elt, ast.Call) and getattr(node.elt.func, "id", "") == "DeclareLaunchArgument"]
+    assert len(loops) == 1 and ast.unparse(loops[0].generators[0].iter) == "args.ARGUMENTS"
 
 
 def test_launch_file_declares_its_arguments():
