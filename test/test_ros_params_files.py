@@ -224,3 +224,15 @@ def test_a_namespaced_estimator_gets_the_shipped_file_and_warns_about_a_file_for
     assert "'gpf_estimator'" in unmatched[0] and "'/**/gpf_estimator:'" in unmatched[0], unmatched
     undeclared = [line for line in text.splitlines() if "n_particle" in line and "does not declare" in line]
     assert len(undeclared) == 1 and "WARN" in undeclared[0], text
+
+
+@pytest.mark.parametrize("module, program", [("gpf_nav.ros.estimator_node", "estimator"),
+                                             ("gpf_nav.ros.simulator_node", "simulator")])
+def test_arguments_rcl_refuses_end_with_one_line_of_ours_and_exit_2(tmp_path, module, program):
+    """What the pre-check cannot see (rcl's own argument rules) still ends without a traceback."""
+    pytest.importorskip("rclpy")
+    r = subprocess.run([sys.executable, "-m", module, "--ros-args", "--log-level", "bogus"], env=_env(),
+                       cwd=tmp_path, capture_output=True, text=True, timeout=WAIT)
+    ours = [line for line in r.stderr.splitlines() if line.startswith(f"{program}: error: ")]
+    assert r.returncode == 2 and len(ours) == 1 and "log level" in ours[0], (r.returncode, r.stderr)
+    assert "Traceback" not in r.stdout + r.stderr
