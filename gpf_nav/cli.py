@@ -5,6 +5,8 @@
     gpf-nav sweep        mismatch / noise sweeps (``gpf_nav.experiments.sweep``)
     gpf-nav stress       large prior, range only, outliers, bias, prior size (``gpf_nav.experiments.stress``)
     gpf-nav integrity    co-state monitor false alarms and detection delays (``gpf_nav.experiments.integrity``)
+    gpf-nav honesty      covariance honesty where the data cannot determine the state, observability
+                         report and consistency monitor (``gpf_nav.experiments.honesty``)
     gpf-nav sensors      rae only against the full sensor suite (``gpf_nav.experiments.sensor_campaign``)
     gpf-nav demo         simulator + estimator over ROS 2, with a summary (``gpf_nav.tools.demo``)
     gpf-nav record       the simulator's scenario written as a rosbag2 bag (``gpf_nav.bags.record``)
@@ -31,6 +33,7 @@ COMMANDS = {
     "stress": "gpf_nav.experiments.stress",
     "demo": "gpf_nav.tools.demo",
     "integrity": "gpf_nav.experiments.integrity",
+    "honesty": "gpf_nav.experiments.honesty",
     "sensors": "gpf_nav.experiments.sensor_campaign",
     "record": "gpf_nav.bags.record",
     "replay": "gpf_nav.bags.replay",

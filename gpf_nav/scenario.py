@@ -261,6 +261,18 @@ def initial_state(config: ScenarioConfig) -> np.ndarray:
     return np.array([r_a, 0.0, 0.0, 0.0, v_a * math.cos(inc), v_a * math.sin(inc)])
 
 
+def undetermined_subspace(config: ScenarioConfig, state: np.ndarray) -> np.ndarray | None:
+    """The directions ``(6, d)`` of the state ``(6,)`` that the scenario's measurements cannot determine
+    from the Moon's centre (columns, state units): any rotation of the whole trajectory about the centre
+    for range only (``d = 3``), the rotation about the polar axis without azimuth (``d = 1``), none for
+    the full case (``(6, 0)``). None when the station is not at the centre (no such symmetry)."""
+    if any(config.station):
+        return None
+    axes = {"range": np.eye(3), "partial": np.eye(3)[:, 2:], "full": np.zeros((3, 0))}[config.case]
+    p, v = np.asarray(state[:3], dtype=float), np.asarray(state[3:6], dtype=float)
+    return np.vstack([np.cross(axes.T, p).T, np.cross(axes.T, v).T]) if axes.size else np.zeros((6, 0))
+
+
 def _streams(seed: int) -> list[np.random.Generator]:
     """Independent generators for truth noise, measurement noise, prior, dropouts and outliers (in that
     order; the first four are the children a four-stream spawn gave, so adding the fifth changed no

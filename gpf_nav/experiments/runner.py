@@ -21,10 +21,20 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gpf_nav.experiments import metrics
-from gpf_nav.scenario import ScenarioConfig, filter_model, generate
+from gpf_nav.integrity import ConsistencyMonitor, innovation_moments
+from gpf_nav.scenario import ScenarioConfig, filter_model, generate, undetermined_subspace
+from gpf_nav.sensors.model import ModelSensor
 
 DEFAULT_PARTICLES = 500
 DEFAULT_DIVERGENCE_BOUND = 1.0e6  # m: a run whose position error ever exceeds 1000 km has diverged
+NEES_BOUND = 22.458
+"""chi-square 99.9 % bound of 6 degrees of freedom: a step whose NEES is above it is overconfident."""
+REPORT_AFTER = 100.0
+"""Observability verdicts are counted from this many seconds into a run (the data need time to determine
+what they can)."""
+NAMED_COSINE = 0.95
+"""An undetermined subspace is *named* when its dimension is right and every principal angle to the
+scenario's known one is below arccos of this (18 degrees), in the no-data standard deviations."""
 
 GPF_DEFAULT = "GPF (innovation, likelihood)"
 """The paper's GPF as its experiments run it (the reference row of Table 1)."""
@@ -211,6 +221,11 @@ def run_filter(flt, scenario, divergence_bound: float = DEFAULT_DIVERGENCE_BOUND
     ess = np.full(steps, np.nan)
     costate = np.full(steps, np.nan)
     resampled = np.zeros(steps, dtype=bool)
+    undetermined = np.full(steps, np.nan)
+    named = np.full(steps, np.nan)
+    fault = np.zeros(steps, dtype=bool)
+    monitor = ConsistencyMonitor()
+    sensor = ModelSensor(filter_model(scenario.config))
     is_particle = hasattr(flt, "ess")
     error = None
     start = time.perf_counter()
@@ -218,7 +233,14 @@ def run_filter(flt, scenario, divergence_bound: float = DEFAULT_DIVERGENCE_BOUND
         flt.initialize(scenario.prior_mean, scenario.prior_cov)
         for k in range(steps):
             flt.predict(dt, scenario.specific_force[k])
+            if np.isfinite(scenario.measurements[k]).any():
+                r, S = innovation_moments(sensor, scenario.measurements[k], flt.mean, flt.covariance, flt.time)
+                fault[k] = monitor.update(r, S).level == "FAULT"
             flt.update(scenario.measurements[k])
+            report = flt.observability
+            if report is not None:
+                undetermined[k] = report.undetermined
+                named[k] = _named(report, undetermined_subspace(scenario.config, scenario.truth[k + 1]))
             mean = flt.mean
             if not np.all(np.isfinite(mean)):
                 error = f"non-finite estimate at step {k}"
@@ -236,6 +258,7 @@ def run_filter(flt, scenario, divergence_bound: float = DEFAULT_DIVERGENCE_BOUND
         error = f"{type(exc).__name__}: {exc}"
     seconds = time.perf_counter() - start
     nees = metrics.nees(state_errors, covariances)
+    late = scenario.times - scenario.start_time >= REPORT_AFTER
     nonfinite = error is not None
     finished = bool(np.all(np.isfinite(pos_err)))
     summary = {
@@ -250,14 +273,43 @@ def run_filter(flt, scenario, divergence_bound: float = DEFAULT_DIVERGENCE_BOUND
         "final_position_error": float(pos_err[-1]),
         "first_ess": float(ess[0]),
         "covariance_failures": int(metrics.not_positive_definite(covariances[np.isfinite(pos_err)]).sum()),
+        "above_bound": float(np.mean(nees[np.isfinite(nees)] > NEES_BOUND)) if finished else math.nan,
+        "undetermined_share": _share(undetermined[late] > 0, undetermined[late]),
+        "named_share": _share(named[late] > 0, named[late]),
+        "consistency_faults": float(fault.mean()),
+        "first_fault": float(scenario.times[np.argmax(fault)] - scenario.start_time) if fault.any() else math.nan,
         "nonfinite": nonfinite,
         "error": error,
         "seconds": seconds,
     }
     summary["diverged"] = bool(not nonfinite and summary["max_position_error"] > divergence_bound)
     summary["series"] = {"position_error": pos_err, "velocity_error": vel_err, "nees": nees,
-                         "ess": ess, "costate_norm": costate}
+                         "ess": ess, "costate_norm": costate, "undetermined": undetermined,
+                         "consistency_fault": fault}
     return summary
+
+
+def _share(hits: np.ndarray, values: np.ndarray) -> float:
+    """Share of the steps with a defined ``values`` (not NaN) where ``hits``; NaN when none is defined."""
+    defined = np.isfinite(values)
+    return float(hits[defined].mean()) if defined.any() else math.nan
+
+
+def _named(report, expected: np.ndarray | None) -> float:
+    """1.0 when the report's undetermined subspace is ``expected`` ``(6, d)`` (same dimension, principal
+    angles within :data:`NAMED_COSINE`, the user's state of the report), 0.0 when not, NaN when the
+    scenario knows no such subspace."""
+    if expected is None:
+        return math.nan
+    directions = report.directions[:, :expected.shape[0]]
+    if directions.shape[0] != expected.shape[1]:
+        return 0.0
+    if not expected.shape[1]:
+        return 1.0
+    scale = report.scale[:expected.shape[0]]
+    a = np.linalg.qr(expected / scale[:, None])[0]
+    b = np.linalg.qr(directions.T / scale[:, None])[0]
+    return float(np.linalg.svd(a.T @ b, compute_uv=False).min() >= NAMED_COSINE)
 
 
 def run_task(task: RunTask) -> dict:

@@ -146,6 +146,12 @@ def summarise(chunk: list[dict], name: str, bound: float) -> dict:
         "first_ess_min": stat("first_ess", np.min) if particle else None,
         "covariance_failures": int(sum(s["covariance_failures"] for s in rows)),
         "covariance_failure_runs": sum(s["covariance_failures"] > 0 for s in rows),
+        "above_bound_mean": stat("above_bound", np.mean),
+        "undetermined_share_mean": stat("undetermined_share", np.mean),
+        "named_share_mean": stat("named_share", np.mean),
+        "consistency_fault_share": stat("consistency_faults", np.mean),
+        "consistency_fault_runs": sum(s["consistency_faults"] > 0 for s in rows),
+        "first_fault_median": stat("first_fault", np.median),
         "per_run_position_rmse": position,
     }
 

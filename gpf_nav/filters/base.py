@@ -15,6 +15,7 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
+from gpf_nav.integrity.observability import ObservabilityReport, ObservabilityTracker
 from gpf_nav.models.base import StateSpaceModel
 from gpf_nav.models.validation import validate_model
 from gpf_nav.sensors.base import Padded, Sensor
@@ -52,6 +53,7 @@ class Filter(ABC):
         self._recovering = False
         self._model_checked = False
         self._own_sensor = ModelSensor(model)
+        self._observability = ObservabilityTracker(model)
 
     @abstractmethod
     def initialize(self, mean: np.ndarray, cov: np.ndarray, t0: float = 0.0) -> None:
@@ -75,6 +77,21 @@ class Filter(ABC):
     @abstractmethod
     def covariance(self) -> np.ndarray:
         """Posterior covariance ``(n, n)``."""
+
+    @property
+    def observability(self) -> ObservabilityReport | None:
+        """What the measurements have determined since the prior, and the directions they have not
+        (:mod:`gpf_nav.integrity.observability`); None before :meth:`initialize`."""
+        return self._observability.report()
+
+    def _observe_predict(self, dt: float, u) -> None:
+        """Carry the observability recursions over ``dt`` (call before :attr:`time` moves)."""
+        self._observability.predict(dt, self.time, u)
+
+    def _observe_update(self, y: np.ndarray, sensor: Sensor, rows: np.ndarray, mean: np.ndarray) -> None:
+        """Add the information of the measured ``rows`` ``(m,)`` of ``y`` from ``sensor``; ``mean`` ``(n,)``
+        is the filter's own (where the tracker moves its reference if it has lost it)."""
+        self._observability.update(sensor, y, rows, self.time, mean)
 
     def _require_initialized(self) -> None:
         if not self.initialized:
@@ -143,6 +160,7 @@ class Filter(ABC):
             validate_model(self.model, mean, cov, t0)
             self._model_checked = True
         self.time = t0
+        self._observability.reset(mean, cov)
         return mean, cov
 
     @property

@@ -54,6 +54,7 @@ class EnsembleKF(Filter):
         dt = self._check_dt(dt)
         if dt == 0.0:
             return
+        self._observe_predict(dt, u)
         X = self.model.transition(self._X, dt, self.time, u)
         self._X = X + self.rng.standard_normal(X.shape) @ self._noise.process_sqrt(dt, self.time).T
         self.time += dt
@@ -67,6 +68,7 @@ class EnsembleKF(Filter):
         if measured is None:
             return
         y, mask, k = measured
+        self._observe_update(y, sensor, mask, self.mean)
         X = self._X
         HX = sensor.measure(X, self.time)
         h_mean = sensor.measurement_mean(HX, self._weights)

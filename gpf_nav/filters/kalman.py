@@ -173,6 +173,7 @@ class ExtendedKF(InnovationGated, _GaussianFilter):
         if dt == 0.0:
             return
         x = self._x[None]
+        self._observe_predict(dt, u)
         F = self.model.transition_jacobian(x, dt, self.time, u)[0]
         self._x = self.model.transition(x, dt, self.time, u)[0]
         P = F.dot(self._P).dot(F.T)
@@ -189,6 +190,7 @@ class ExtendedKF(InnovationGated, _GaussianFilter):
         if measured is None:
             return
         y, mask, k = measured
+        self._observe_update(y, sensor, mask, self._x)
         x = self._x[None]
         hx, H = sensor.measure_and_jacobian(x, self.time)
         r, H = sensor.residual(y, hx[0]), H[0]
@@ -288,6 +290,7 @@ class UnscentedKF(_GaussianFilter):
         dt = self._check_dt(dt)
         if dt == 0.0:
             return
+        self._observe_predict(dt, u)
         Y = self.model.transition(self._x + self._sigma_offsets(), dt, self.time, u)
         D = Y - Y[0]
         delta = self._w * D.sum(axis=0)
@@ -304,6 +307,7 @@ class UnscentedKF(_GaussianFilter):
         if measured is None:
             return
         y, mask, k = measured
+        self._observe_update(y, sensor, mask, self._x)
         E = self._sigma_offsets()
         Z = sensor.measure(self._x + E, self.time)
         dZ = sensor.residual(Z, Z[0])

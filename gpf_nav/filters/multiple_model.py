@@ -82,6 +82,7 @@ class MultipleModelGPF:
         self.model_probabilities = np.full(2, 0.5)
         self._predicted_probabilities = self.model_probabilities
         self._mix_due = False
+        self._moments = None
 
     @property
     def members(self) -> tuple[GeometricProjectionPF, GeometricProjectionPF]:
@@ -90,6 +91,7 @@ class MultipleModelGPF:
     # --- the filter interface ------------------------------------------------------------------------
     def initialize(self, mean, cov, t0: float = 0.0) -> None:
         """Both members from the user's prior ``N(mean (n,), cov (n, n))``; model probabilities 1/2."""
+        self._moments = None
         for member in self.members:
             member.initialize(mean, cov, t0)
         self.model_probabilities = np.full(2, 0.5)
@@ -97,6 +99,7 @@ class MultipleModelGPF:
         self._mix_due = False
 
     def predict(self, dt: float, u: np.ndarray | None = None) -> None:
+        self._moments = None
         if self._mix_due and dt > 0.0:
             self._mix(1.0 - math.exp(-dt / self.switch_time))
         for member in self.members:
@@ -104,6 +107,7 @@ class MultipleModelGPF:
 
     def update(self, y: np.ndarray, sensor=None) -> None:
         """Both members update with ``y`` of ``sensor`` (None: the model's); then the probabilities."""
+        self._moments = None
         before = [(m.gated, m.recoveries) for m in self.members]
         for member in self.members:
             member.update(y, sensor)
@@ -132,6 +136,7 @@ class MultipleModelGPF:
             # mixed (module docstring, step 1)
         self._predicted_probabilities = predicted
         self._mix_due = False
+        self._moments = None
 
     # --- the estimate --------------------------------------------------------------------------------
     @property
@@ -148,15 +153,30 @@ class MultipleModelGPF:
 
     @property
     def mean(self) -> np.ndarray:
-        return mixture_moments(self.model_probabilities, self._estimates())[0]
+        return self._mixture()[0]
 
     @property
     def covariance(self) -> np.ndarray:
         """Covariance ``(n, n)`` of the mixture of the members' estimates, positive definite."""
-        return positive_definite(mixture_moments(self.model_probabilities, self._estimates())[1])
+        return self._mixture()[1]
+
+    def _mixture(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(mean, covariance)`` of the mixture, kept until the next step changes the members."""
+        if self._moments is None:
+            mean, cov = mixture_moments(self.model_probabilities, self._estimates())
+            self._moments = (mean, positive_definite(cov))
+            for array in self._moments:
+                array.flags.writeable = False
+        return self._moments
 
     def _estimates(self) -> list[tuple[np.ndarray, np.ndarray]]:
         return [(m.mean, m.covariance) for m in self.members]
+
+    @property
+    def observability(self):
+        """The nominal member's :class:`~gpf_nav.integrity.observability.ObservabilityReport`: what the
+        data determined of the user's state (the compensated member's also counts its accelerations)."""
+        return self.nominal.observability
 
     @property
     def unmodelled_acceleration(self) -> np.ndarray:

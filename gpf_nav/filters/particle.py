@@ -26,7 +26,7 @@ import numpy as np
 
 from gpf_nav import resampling as resamplers
 from gpf_nav.filters.base import Filter
-from gpf_nav.filters.kernel import match_moments
+from gpf_nav.filters.kernel import match_moments, weighted_moments
 from gpf_nav.filters.projection import project
 from gpf_nav.linalg import cholesky_or_none, positive_definite, psd_sqrt
 from gpf_nav.models.base import StateSpaceModel
@@ -67,8 +67,12 @@ class ParticleFilter(Filter):
 
     def __init__(self, model: StateSpaceModel, n_particles: int = 500, resampling: str = "systematic",
                  ess_threshold: float = 0.5, seed: int | np.random.Generator | None = None,
-                 collapse_steps: int = 0, tempering_ess: float = 0.0):
+                 collapse_steps: int = 0, tempering_ess: float = 0.0,
+                 observability_constraint: float = 0.0):
         super().__init__(model, seed)
+        if not 0.0 <= float(observability_constraint) < 1.0:
+            raise ValueError(f"observability_constraint must lie in [0, 1), got {observability_constraint}")
+        self.observability_constraint = float(observability_constraint)
         if not 0.0 <= float(tempering_ess) < 1.0:
             raise ValueError(f"tempering_ess must lie in [0, 1), got {tempering_ess}")
         self.tempering_ess = float(tempering_ess)
@@ -200,6 +204,7 @@ class ParticleFilter(Filter):
             factor = self._noise_factors(self._pending_dt)[0]
             # a new array, so views handed out as `particles` keep their state
             self._x = self._x + factor @ self.rng.standard_normal(self._x.shape)
+        self._observe_predict(dt, u)
         self._x = np.ascontiguousarray(self.model.transition(self._x.T, dt, self.time, u).T)
         self._pending_dt, self._pending_t = dt, self.time
         self.time += dt
@@ -218,12 +223,20 @@ class ParticleFilter(Filter):
         self._require_initialized()
         sensor = self._use(sensor)
         y, rows = self._check_measurement(y, sensor)
+        prior, basis = None, None
+        if rows.any():
+            self._observe_update(y, sensor, rows, self._cloud_mean())
+            if self.observability_constraint:
+                basis = self._observability.basis(self.observability_constraint)
+                prior = self._predicted_moments() if basis.shape[1] else None
         try:
             evidence, rows = self._tempered_stages(y, rows)
         finally:
             self._fraction = 1.0
         if evidence is None:  # the filter re-initialised itself
             return
+        if prior is not None:
+            self._constrain(basis, *prior)
         self.tempered_updates += self.tempering_stages > 1
         self.log_likelihood = evidence
         self._after_update(y, rows)
@@ -264,6 +277,54 @@ class ParticleFilter(Filter):
             fraction = min(remaining, TEMPERING_FACTOR * fraction)
             if remaining - fraction < 1e-12:  # (rounding: the last stage takes what is left)
                 fraction = remaining
+
+    def _predicted_moments(self) -> tuple[np.ndarray, np.ndarray]:
+        """Mean ``(n,)`` and covariance ``(n, n)`` of the predicted cloud, pending process noise included."""
+        _, _, cov = weighted_moments(self._x, self._weights)
+        if self._pending_dt > 0.0:
+            cov = cov + self.model.process_noise(self._pending_dt, self._pending_t)
+        return self._cloud_mean(), cov
+
+    def _cloud_mean(self) -> np.ndarray:
+        """Weighted mean ``(n,)`` of the cloud, in the filter's own state (:attr:`mean` may report the
+        user's part of it only)."""
+        return np.einsum("in,n->i", self._x, self._weights)
+
+    def _constrain(self, basis: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> None:
+        """Observability-constrained update: keep the prediction ``N(mean (n,), cov (n, n))`` along the
+        undetermined directions ``basis`` ``(n, d)`` (:mod:`gpf_nav.integrity.observability`).
+
+        With ``s = V^T x`` the determined coordinates (``V`` spans the complement of the undetermined
+        subspace ``U``), a likelihood that depends on ``s`` alone leaves the prediction's conditional
+        ``p(x | s)`` unchanged: the posterior is ``p(s | y) p(x | s)``. Its moments are the update's for
+        ``s`` and the prediction's regression for the rest,
+        ``m = m^- + B (V^T m^+ - V^T m^-)``, ``P = P^- - B V^T P^- + B (V^T P^+ V) B^T``,
+        ``B = P^- V (V^T P^- V)^-1``, and the cloud is moved to them by an affine map. The particle
+        update is exact only in the limit; along an undetermined direction of a curved problem its
+        approximations (a Gaussian kernel, one linearisation for the whole cloud) manufacture information
+        there is none of, which this removes. Computed in units of the prediction's standard deviations."""
+        n = cov.shape[0]
+        scale = np.sqrt(np.maximum(cov.diagonal(), 1e-300))
+        P_prior = cov / np.outer(scale, scale)
+        m_prior = mean / scale
+        m_post, _, P_post = weighted_moments(self._x / scale[:, None], self._weights)
+        if basis.shape[1] >= n:
+            m, P = m_prior, P_prior
+        else:
+            q, _ = np.linalg.qr(np.column_stack([basis / scale[:, None], np.eye(n)]))
+            V = q[:, basis.shape[1]:]  # (n, n - d) the determined coordinates
+            PV = P_prior @ V
+            try:
+                B = np.linalg.solve(V.T @ PV, PV.T).T
+            except np.linalg.LinAlgError:
+                return
+            m = m_prior + B @ (V.T @ (m_post - m_prior))
+            P = P_prior - B @ PV.T + B @ (V.T @ P_post @ V) @ B.T
+        P = 0.5 * (P + P.T) * np.outer(scale, scale)
+        if np.isfinite(P).all() and np.isfinite(m).all():
+            moved = match_moments(self._x, self._weights, m * scale, P, symmetric=True)
+            if moved is not None:
+                self._x = moved
 
     def _use(self, sensor: Sensor | None) -> Sensor:
         """Make ``sensor`` (None: the model's own) the one this update measures with, and read its noise

@@ -8,7 +8,8 @@
   determined), :class:`ObservabilityTracker`.
 """
 from gpf_nav.integrity.costate import LEVELS, CostateMonitor, IntegrityStatus, hotelling_t2, t2_threshold
+from gpf_nav.integrity.consistency import ConsistencyMonitor, ConsistencyStatus, innovation_moments
 from gpf_nav.integrity.observability import ObservabilityReport, ObservabilityTracker, UNDETERMINED_INFORMATION
 
-__all__ = ["CostateMonitor", "IntegrityStatus", "hotelling_t2", "t2_threshold", "LEVELS",
+__all__ = ["ConsistencyMonitor", "ConsistencyStatus", "innovation_moments", "CostateMonitor", "IntegrityStatus", "hotelling_t2", "t2_threshold", "LEVELS",
            "ObservabilityReport", "ObservabilityTracker", "UNDETERMINED_INFORMATION"]

@@ -18,18 +18,11 @@ The information the data carried, in the prior's own scaled units, is
 ``J_s = L^T (P_data^-1 - P_free^-1) L`` with ``L L^T = P_free``: its eigenvalue ``lambda_i`` along the
 scaled direction ``u_i`` is the data's information over the prior's (``1 / (1 + lambda)`` is the share of
 the no-data variance left). A direction with ``lambda_i < threshold`` (default
-:data:`UNDETERMINED_INFORMATION`: the data removed less than a tenth of the prior's variance, ~5 % of its
-standard deviation) is *undetermined*; in state units it is ``d_i = L u_i``.
+:data:`UNDETERMINED_INFORMATION`: the data removed less than 1 % of the prior's variance) is *undetermined*; in state units it is ``d_i = L u_i``.
 
-The undetermined directions are carried from step to step by the transition Jacobian, first-estimates
-style (``U <- F U``), and replaced by the tracker's new ones only when the undetermined subspace changes
-(its dimension, or a principal angle beyond :data:`SUBSPACE_TOLERANCE`). A basis re-read at every moved
-mean would turn a little with each correction, and a direction known to a few metres along a basis turned
-by 1e-5 rad mixes in some 1e-5 of a direction known only to 20 km: enough, over hundreds of updates, to
-fake information (the inconsistency that observability-constrained EKFs and first-estimate Jacobians
-were invented to stop). The undetermined subspace is what
-:meth:`~gpf_nav.filters.particle.ParticleFilter.update` keeps the prior's along, when its filter is
-observability-constrained.
+Filters whose update is observability-constrained
+(:meth:`~gpf_nav.filters.particle.ParticleFilter.update`) keep the prediction along the directions that
+carried less than their own, smaller, threshold (:meth:`ObservabilityTracker.basis`).
 
 Everything is linearised along a reference trajectory (:class:`ObservabilityTracker`): the report is about the geometry (which directions the
 measurement functions and the dynamics can see), not about how far the estimate is from the truth.
@@ -41,16 +34,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-UNDETERMINED_INFORMATION = 0.1
+UNDETERMINED_INFORMATION = 0.01
 """Default threshold: a direction along which the data carried less than this much information, relative to
 the prior's (scaled units), is undetermined."""
 REANCHOR_SIGMAS = 10.0
 """A measurement this many standard deviations of the no-data prediction from the reference's moves the
 reference to the filter's mean."""
-SUBSPACE_TOLERANCE = 1e-2
-"""Largest principal angle (rad) between the carried and the newly computed undetermined subspaces for
-which the carried one is kept."""
-
 
 @dataclass(frozen=True)
 class ObservabilityReport:
@@ -64,6 +53,8 @@ class ObservabilityReport:
             smallest first.
         threshold: the information below which a direction is undetermined.
         updates: measurement updates the tracker has seen since the prior.
+        scale: ``(n,)`` the no-data standard deviations the information is measured in.
+        eigenvectors: ``(n, n)`` every direction (rows, state units), in the order of ``information``.
     """
 
     undetermined: int
@@ -72,6 +63,7 @@ class ObservabilityReport:
     threshold: float
     updates: int
     scale: np.ndarray = field(repr=False, default=None)
+    eigenvectors: np.ndarray = field(repr=False, default=None)
 
     @property
     def determined(self) -> bool:
@@ -115,8 +107,8 @@ class ObservabilityTracker:
         self.model = model
         self.threshold = float(threshold)
         self._free = self._data = self._reference = None
-        self._basis = np.zeros((0, 0))
         self._report: ObservabilityReport | None = None
+        self._noise: tuple[float, np.ndarray] | None = None
         self.updates = 0
         self.reanchors = 0
 
@@ -125,7 +117,6 @@ class ObservabilityTracker:
         cov = np.array(cov, dtype=float)
         self._reference = np.array(mean, dtype=float)
         self._free, self._data = cov, cov.copy()
-        self._basis = np.eye(cov.shape[0])  # every direction undetermined
         self.updates = 0
         self._report = None
 
@@ -142,22 +133,28 @@ class ObservabilityTracker:
             self.reanchors += 1
 
     def predict(self, dt: float, t: float, u=None) -> None:
-        """Carry both recursions, the reference and the undetermined basis over ``dt`` from time ``t``
+        """Carry both recursions and the reference over ``dt`` from time ``t``
         with the input ``u``."""
         if self._free is None:
             return
         x = self._reference[None]
         F = self.model.transition_jacobian(x, dt, t, u)[0]
-        Q = self.model.process_noise(dt, t)
+        Q = self._process_noise(dt, t)
         reference = self.model.transition(x, dt, t, u)[0]
         if not (np.isfinite(F).all() and np.isfinite(Q).all() and np.isfinite(reference).all()):
             return
         self._reference = reference
         self._free = _symmetric(F @ self._free @ F.T + Q)
         self._data = _symmetric(F @ self._data @ F.T + Q)
-        if self._basis.size:
-            self._basis = _orthonormal(F @ self._basis)
         self._report = None
+
+    def _process_noise(self, dt: float, t: float) -> np.ndarray:
+        """``Q(dt)``, cached for the last ``dt`` when the model's noise does not depend on time."""
+        if self.model.time_varying_noise:
+            return self.model.process_noise(dt, t)
+        if self._noise is None or self._noise[0] != dt:
+            self._noise = (dt, self.model.process_noise(dt, t))
+        return self._noise[1]
 
     def update(self, sensor, y: np.ndarray, rows: np.ndarray, t: float, mean: np.ndarray) -> None:
         """Add the information of the measured ``rows`` ``(m,)`` of ``y`` from ``sensor`` at time ``t``,
@@ -172,7 +169,8 @@ class ObservabilityTracker:
             return
         spread = H @ self._free @ H.T + R
         try:
-            far = float(r @ np.linalg.solve(spread, r)) > REANCHOR_SIGMAS ** 2
+            with np.errstate(all="ignore"):
+                far = not float(r @ np.linalg.solve(spread, r)) <= REANCHOR_SIGMAS ** 2  # NaN: far
         except np.linalg.LinAlgError:
             far = True
         if far:
@@ -196,13 +194,15 @@ class ObservabilityTracker:
             self._report = self._compute()
         return self._report
 
-    def undetermined_basis(self) -> np.ndarray:
-        """``(n, d)`` orthonormal basis of the undetermined subspace, carried first-estimates style (module
-        docstring); ``(n, 0)`` when everything is determined."""
+    def basis(self, threshold: float | None = None) -> np.ndarray:
+        """``(n, d)`` orthonormal basis (state units) of the directions with less information than
+        ``threshold`` (default: the report's); ``(n, 0)`` when there are none or no report."""
         report = self.report()
         if report is None:
             return np.zeros((0 if self._free is None else self._free.shape[0], 0))
-        return self._basis
+        limit = self.threshold if threshold is None else float(threshold)
+        d = int(np.count_nonzero(report.information < limit))
+        return _orthonormal(report.eigenvectors[:d].T) if d else np.zeros((report.information.size, 0))
 
     def _compute(self) -> ObservabilityReport | None:
         free, data = self._free, self._data
@@ -221,26 +221,12 @@ class ObservabilityTracker:
         information = np.maximum(sv[::-1] ** 2 - 1.0, 0.0)
         u = vt[::-1]  # rows, smallest information first
         d = int(np.count_nonzero(information < self.threshold))
-        directions = (u[:d] @ L.T) * s  # d_i = L u_i, back in state units
-        if d:
-            directions = directions / np.linalg.norm(directions / s, axis=1, keepdims=True)
-        self._reconcile(directions.T, s)
-        if not np.isfinite(information).all():
+        vectors = (u @ L.T) * s  # d_i = L u_i, back in state units
+        vectors = vectors / np.linalg.norm(vectors / s, axis=1, keepdims=True)
+        if not (np.isfinite(information).all() and np.isfinite(vectors).all()):
             return None
-        return ObservabilityReport(d, directions, information, self.threshold, self.updates, scale=s)
-
-    def _reconcile(self, new: np.ndarray, scale: np.ndarray) -> None:
-        """Keep the carried basis unless the undetermined subspace ``new`` ``(n, d)`` differs from it
-        (principal angles measured in the no-data standard deviations ``scale`` ``(n,)``)."""
-        if new.shape[1] == 0:
-            self._basis = new
-            return
-        if self._basis.shape[1] == new.shape[1]:
-            carried = _orthonormal(self._basis / scale[:, None])
-            cosines = np.linalg.svd(carried.T @ _orthonormal(new / scale[:, None]), compute_uv=False)
-            if cosines.min() >= math.cos(SUBSPACE_TOLERANCE):
-                return
-        self._basis = _orthonormal(new)
+        return ObservabilityReport(d, vectors[:d], information, self.threshold, self.updates, scale=s,
+                                   eigenvectors=vectors)
 
 
 def _symmetric(a: np.ndarray) -> np.ndarray:
