@@ -556,6 +556,16 @@ class EstimatorEngine:
         if status.level != "OK":
             self._alarms[status.level] = (self.monotonic(), status)
 
+    def observability(self):
+        """The filter's :class:`~gpf_nav.integrity.observability.ObservabilityReport` (None before the
+        filter is initialised, or if it has none)."""
+        if not self.initialized:
+            return None
+        try:
+            return self.filter.observability
+        except Exception:  # noqa: BLE001 - a broken report must not take the diagnostics down
+            return None
+
     def integrity(self) -> IntegrityReport:
         """The co-state monitor's state for the diagnostics (see :class:`IntegrityReport`)."""
         common = dict(fault_updates=self.integrity_fault_updates, warn_updates=self.integrity_warn_updates,

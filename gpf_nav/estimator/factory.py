@@ -11,6 +11,7 @@ import numpy as np
 
 from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME
 from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
+from gpf_nav.filters.gpf import OBSERVABILITY_CONSTRAINT
 from gpf_nav.filters.multiple_model import SWITCH_TIME
 from gpf_nav.models.lunar import LunarDescentModel
 
@@ -66,7 +67,8 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
         from gpf_nav.filters import BootstrapPF
         return BootstrapPF(model, int(n_particles), resampling=resampling, ess_threshold=ess_threshold,
                            seed=seed, compute_costate=bool(compute_costate),
-                           regularization=regularization or 1e-6, collapse_steps=int(collapse_steps))
+                           regularization=regularization or 1e-6, collapse_steps=int(collapse_steps),
+                           observability_constraint=OBSERVABILITY_CONSTRAINT)
     cls = _core_class({"ekf": "ExtendedKF", "ukf": "UnscentedKF", "enkf": "EnsembleKF"}[name])
     if name == "ekf":
         return cls(model, seed=seed)

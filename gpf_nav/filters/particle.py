@@ -59,6 +59,9 @@ class ParticleFilter(Filter):
             below this is refused, and the update is split into stages, each weighting by a fraction of
             the log-likelihood, ``p(y | x)^f``, with a resampling and a new proposal from the cloud
             between them (:meth:`update`); 0 (default) updates in one stage.
+        observability_constraint: an update keeps the prediction's conditional along the directions
+            about which the data carried less information than this fraction of the prior's
+            (:meth:`_constrain`, :mod:`gpf_nav.integrity.observability`); 0 (default) does not.
 
     Attributes:
         tempering_stages: stages of the last update (1 when it was not split).
@@ -535,13 +538,17 @@ class BootstrapPF(ParticleFilter):
         compute_costate: also compute, as a diagnostic only, the co-state the geometric projection
             would apply to the predicted particles (innovation reference); it costs a projection.
         regularization: relative Tikhonov ``eps`` of that diagnostic projection.
+        observability_constraint: see :class:`ParticleFilter` (0, the default, is the paper's SPF; the
+            node's ``spf`` sets it: resampling alone narrows a direction no measurement sees).
         Other arguments as :class:`ParticleFilter`.
     """
 
     def __init__(self, model: StateSpaceModel, n_particles: int = 500, resampling: str = "systematic",
                  ess_threshold: float = 0.5, seed: int | np.random.Generator | None = None,
-                 compute_costate: bool = False, regularization: float = 1e-6, collapse_steps: int = 0):
-        super().__init__(model, n_particles, resampling, ess_threshold, seed, collapse_steps)
+                 compute_costate: bool = False, regularization: float = 1e-6, collapse_steps: int = 0,
+                 observability_constraint: float = 0.0):
+        super().__init__(model, n_particles, resampling, ess_threshold, seed, collapse_steps,
+                         observability_constraint=observability_constraint)
         self.compute_costate = bool(compute_costate)
         self.regularization = float(regularization)
 

@@ -6,8 +6,10 @@ and the thresholds; :func:`to_msg` turns that into ``diagnostic_msgs/DiagnosticA
 * ERROR: the filter was re-initialised (non-finite output or an exception) within ``reinit_hold`` s;
   or the co-state integrity monitor is at FAULT (held ``monitor_hold`` s);
 * WARN: not initialised yet; ESS/N below ``ess_warn_threshold``; mean co-state norm above
-  ``costate_warn_threshold``; no measurement accepted for ``sensor_timeout`` s (node clock); or the
-  integrity monitor at WARN (held ``monitor_hold`` s);
+  ``costate_warn_threshold``; no measurement accepted for ``sensor_timeout`` s (node clock); the
+  integrity monitor at WARN (held ``monitor_hold`` s); or a direction of the state the measurements have
+  not determined (the observability report, :mod:`gpf_nav.integrity.observability`: along it the
+  estimate is the prior's, whatever the covariance's size);
 * OK otherwise.
 
 The message names every cause (``filter re-initialised (...)``, ``integrity FAULT: ...``), so an ERROR
@@ -78,6 +80,12 @@ def filter_status(engine, now_ns: int | None, thresholds: Thresholds, filter_nam
     if report is not None and report.level != "OK":
         level = max(level, INTEGRITY_LEVEL[report.level])
         problems.append(_integrity_problem(report))
+    observability = engine.observability() if hasattr(engine, "observability") else None
+    if observability is not None and observability.undetermined:
+        level = max(level, WARN)
+        problems.append(f"{observability.undetermined} undetermined direction"
+                        f"{'s' if observability.undetermined > 1 else ''}: "
+                        + "; ".join(observability.describe(state_names(observability.information.size))))
     message = "; ".join(problems) if problems else "tracking"
 
     measurements = MEASUREMENT_STREAMS
@@ -111,7 +119,32 @@ def filter_status(engine, now_ns: int | None, thresholds: Thresholds, filter_nam
     values.extend(stream_values(engine))
     if report is not None:
         values.extend(integrity_values(report, filter_name))
+    values.extend(observability_values(observability))
     return level, message, values
+
+
+STATE_NAMES = ("px", "py", "pz", "vx", "vy", "vz")
+"""Names of the user's state components in the reports (position, velocity; world frame)."""
+
+
+def state_names(n: int) -> tuple[str, ...]:
+    """Names of ``n`` state components: the user's six, then ``s6, s7, ...`` for the filter's own (an
+    estimated acceleration, sensor biases)."""
+    return STATE_NAMES[:n] + tuple(f"s{i}" for i in range(len(STATE_NAMES), n))
+
+
+def observability_values(report) -> list[tuple[str, str]]:
+    """The ``observability ...`` key/values of an observability report (None: not available yet)."""
+    if report is None:
+        return [("observability", "n/a")]
+    values = [("observability", "determined" if report.determined else "UNDETERMINED"),
+              ("observability undetermined directions", str(report.undetermined)),
+              ("observability threshold", _fmt(report.threshold)),
+              ("observability smallest information", _fmt(float(report.information[0]))),
+              ("observability updates", str(report.updates))]
+    for i, text in enumerate(report.describe(state_names(report.information.size)), 1):
+        values.append((f"observability direction {i}", text))
+    return values
 
 
 def stream_values(engine) -> list[tuple[str, str]]:

@@ -1,0 +1,222 @@
+"""Honesty where the data cannot tell (issue 23): the observability report, the observability-constrained
+update, the consistency monitor, and the linear-Gaussian test every filter must pass.
+
+The linear-Gaussian problem: a 1-D constant-velocity target ``[p, v]`` whose position is measured, beside
+a constant ``z`` that no measurement sees. The Kalman filter is the exact posterior, and along ``z`` that
+posterior is the prior: ``z``'s mean and variance never move. Every filter must keep them.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from gpf_nav.estimator.factory import FILTERS, make_filter
+from gpf_nav.filters import ExtendedKF, GeometricProjectionPF
+from gpf_nav.integrity import ConsistencyMonitor, ObservabilityTracker, innovation_moments
+from gpf_nav.models import LinearGaussianModel
+from gpf_nav.scenario import ScenarioConfig, filter_model, generate, undetermined_subspace
+from gpf_nav.sensors.model import ModelSensor
+from linear_reference import kalman, simulate
+
+DT = 1.0
+STEPS = 30
+PRIOR_MEAN = np.array([0.0, 1.0, 3.0])
+PRIOR_COV = np.diag([4.0, 1.0, 4.0])
+
+
+def hidden_constant_model(measure_z: bool = False) -> LinearGaussianModel:
+    """``[p, v, z]``: constant velocity with white acceleration, ``z`` constant; ``p`` measured (and ``z``
+    too when ``measure_z``). ``p`` and ``v`` are declared as position and velocity, so a compensated filter
+    puts its unmodelled acceleration on ``v`` (a model that declares no velocity gets an unmodelled drift
+    on every component, ``z`` included: docs/filters.md)."""
+    C = [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]] if measure_z else [[1.0, 0.0, 0.0]]
+    R = np.diag([1.0, 1.0]) if measure_z else [[1.0]]
+    model = LinearGaussianModel(A=[[0.0, 1.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]],
+                                G=[[0.0], [0.5], [0.0]], C=C, R=R)
+    model.position_index, model.velocity_index = (0,), (1,)
+    return model
+
+
+def _run(flt, model, seed=3):
+    ys = simulate(model, [0.5, 1.2, 2.0], STEPS, DT, seed)
+    flt.initialize(PRIOR_MEAN, PRIOR_COV)
+    for y in ys:
+        flt.predict(DT)
+        flt.update(y)
+    return ys
+
+
+def test_the_kalman_filter_keeps_the_prior_along_a_component_no_measurement_sees():
+    model = hidden_constant_model()
+    ys = simulate(model, [0.5, 1.2, 2.0], STEPS, DT, 3)
+    m, P = kalman(model, PRIOR_MEAN, PRIOR_COV, ys, DT)[-1]
+    assert m[2] == pytest.approx(PRIOR_MEAN[2], abs=1e-12)
+    assert P[2, 2] == pytest.approx(PRIOR_COV[2, 2], rel=1e-12)
+    assert P[0, 0] < 0.5 * PRIOR_COV[0, 0]  # the measured component did learn
+
+
+@pytest.mark.parametrize("name", FILTERS)
+def test_every_filter_keeps_the_prior_along_a_component_no_measurement_sees(name):
+    """Mean within 4 Monte Carlo standard errors of the prior mean, variance within 12 % of the prior's
+    (N = 2000: a sample variance's relative standard error is 3 %); the measured position learns. A
+    resampling draws the cloud again, so its error adds up over the resamplings: the standard error of the
+    mean is taken as ``sigma sqrt((1 + resamplings) / N)``."""
+    model = hidden_constant_model()
+    flt = make_filter(name, model, n_particles=2000, seed=5)
+    _run(flt, model)
+    mean, cov = np.asarray(flt.mean), np.asarray(flt.covariance)
+    draws = 1 + getattr(flt, "resample_count", 0)
+    sigma = math.sqrt(PRIOR_COV[2, 2])
+    assert abs(mean[2] - PRIOR_MEAN[2]) < 4.0 * sigma * math.sqrt(draws / 2000), (name, mean[2], draws)
+    assert cov[2, 2] == pytest.approx(PRIOR_COV[2, 2], rel=0.12), (name, cov[2, 2])
+    assert cov[0, 0] < 0.5 * PRIOR_COV[0, 0], name
+
+
+@pytest.mark.parametrize("name", FILTERS)
+def test_every_filter_reports_the_hidden_component_and_only_it(name):
+    model = hidden_constant_model()
+    flt = make_filter(name, model, n_particles=300, seed=5)
+    _run(flt, model)
+    report = flt.observability
+    user = report.directions[:, :3]
+    hidden = [d for d in user if abs(d[2]) > 0.99 * np.linalg.norm(d)]
+    assert len(hidden) == 1, (name, report.describe())
+    # a compensated filter may also leave its own acceleration undetermined, never p or v
+    assert all(np.linalg.norm(d[:2]) < 0.1 * max(np.linalg.norm(d), 1e-300) for d in user), name
+    assert report.information[-1] > 10.0  # the measured position is determined
+
+
+def test_a_measured_component_is_determined_and_the_report_reads_it():
+    model = hidden_constant_model(measure_z=True)
+    flt = ExtendedKF(model)
+    _run(flt, model)
+    report = flt.observability
+    assert report.determined and report.undetermined == 0
+    assert report.information.min() > 1.0 and report.describe() == []
+    assert flt.observability.updates == STEPS
+
+
+def test_the_tracker_refuses_a_nonpositive_threshold_and_reports_nothing_before_a_prior():
+    with pytest.raises(ValueError):
+        ObservabilityTracker(hidden_constant_model(), threshold=0.0)
+    tracker = ObservabilityTracker(hidden_constant_model())
+    assert tracker.report() is None and tracker.basis().shape == (0, 0)
+
+
+@pytest.mark.parametrize("case, d", [("range", 3), ("partial", 1), ("full", 0)])
+def test_the_lunar_report_names_the_rotations_about_the_centre(case, d):
+    """Range only: the three rotations of the whole trajectory about the Moon's centre; no azimuth: the
+    rotation about the polar axis; the full case: none (after the first 100 s)."""
+    config = ScenarioConfig(case=case, epsilon=0.0, duration=240.0)
+    scenario = generate(config, 4)
+    flt = ExtendedKF(filter_model(config))
+    flt.initialize(scenario.prior_mean, scenario.prior_cov)
+    for k in range(scenario.times.size):
+        flt.predict(config.dt)
+        flt.update(scenario.measurements[k])
+    report = flt.observability
+    assert report.undetermined == d
+    expected = undetermined_subspace(config, scenario.truth[-1])
+    if d:
+        a = np.linalg.qr(expected / report.scale[:, None])[0]
+        b = np.linalg.qr(report.directions.T / report.scale[:, None])[0]
+        assert np.linalg.svd(a.T @ b, compute_uv=False).min() > 0.99
+
+
+def test_the_constrained_gpf_keeps_the_range_only_rotations_that_the_unconstrained_one_narrows():
+    """A 20 km / 20 m/s prior, range only: along the rotations the constrained GPF's covariance stays at
+    the prior's size; switched off (``observability_constraint=0``), the same filter narrows them."""
+    config = ScenarioConfig(case="range", epsilon=0.0, prior_position_std=20e3, prior_velocity_std=20.0,
+                            duration=300.0)
+    scenario = generate(config, 2)
+
+    def rotation_spread(constraint):
+        flt = GeometricProjectionPF(filter_model(config), 300, seed=1, unmodelled_acceleration_std=0.0,
+                                    observability_constraint=constraint)
+        flt.initialize(scenario.prior_mean, scenario.prior_cov)
+        for k in range(scenario.times.size):
+            flt.predict(config.dt)
+            flt.update(scenario.measurements[k])
+        G = undetermined_subspace(config, flt.mean)
+        A = np.linalg.pinv(G)
+        return np.sqrt(np.diag(A @ flt.covariance @ A.T)) * np.linalg.norm(flt.mean[:3])
+
+    constrained, free = rotation_spread(1e-3), rotation_spread(0.0)
+    assert (constrained > 12e3).all(), constrained
+    assert free.min() < 0.7 * constrained.min(), (free, constrained)
+
+
+def test_the_consistency_monitor_holds_its_false_alarm_rate_on_consistent_innovations():
+    rng = np.random.default_rng(0)
+    monitor = ConsistencyMonitor(false_alarm_rate=1e-2, window=5)
+    S = np.array([[4.0, 1.0], [1.0, 2.0]])
+    L = np.linalg.cholesky(S)
+    faults = sum(monitor.update(L @ rng.standard_normal(2), S).level == "FAULT" for _ in range(20000))
+    # 2e4 correlated tests at 1e-2: the count's spread is a few times sqrt(200)
+    assert 100 < faults < 320, faults
+    assert monitor.updates == 20000 and monitor.faults == faults
+
+
+def test_the_consistency_monitor_flags_a_covariance_four_times_too_small():
+    rng = np.random.default_rng(1)
+    monitor = ConsistencyMonitor()
+    S = np.eye(3)
+    levels = [monitor.update(2.0 * rng.standard_normal(3), S).level for _ in range(200)]
+    assert levels.count("FAULT") > 150
+    assert levels.index("FAULT") < 15
+
+
+def test_the_consistency_monitor_skips_what_it_cannot_test_and_refuses_bad_settings():
+    monitor = ConsistencyMonitor()
+    monitor.update(np.array([np.nan]), np.eye(1))
+    monitor.update(np.ones(2), np.zeros((2, 2)))
+    assert monitor.rejected == 2 and monitor.updates == 0 and monitor.status.level == "OK"
+    for bad in ({"false_alarm_rate": 0.0}, {"false_alarm_rate": 0.1, "warn_false_alarm_rate": 0.01},
+                {"window": 0}):
+        with pytest.raises(ValueError):
+            ConsistencyMonitor(**bad)
+
+
+def test_innovation_moments_are_the_linearised_prediction():
+    config = ScenarioConfig()
+    model = filter_model(config)
+    sensor = ModelSensor(model)
+    x = np.array([1.8e6, 1e4, 2e4, 0.0, 1500.0, 800.0])
+    P = np.diag([100.0, 100.0, 100.0, 1.0, 1.0, 1.0]) ** 2
+    y = model.measure(x[None])[0] + np.array([30.0, 0.0, np.nan])
+    r, S = innovation_moments(sensor, y, x, P)
+    H = model.measurement_jacobian(x[None])[0][:2]
+    assert r == pytest.approx([30.0, 0.0], abs=1e-9)
+    assert S == pytest.approx(H @ P @ H.T + model.measurement_noise()[:2, :2])
+    assert stats.chi2.sf(float(r @ np.linalg.solve(S, r)), 2) > 0.0
+
+
+@pytest.mark.parametrize("case, warns", [("range", True), ("full", False)])
+def test_the_estimator_diagnostics_warn_while_a_direction_is_undetermined(case, warns):
+    """The engine behind the node (no DDS): with range only the ``/diagnostics`` status is WARN, its
+    message names the undetermined directions and its values list them; the full case, after 150 s, is
+    not warned about."""
+    from gpf_nav.estimator.engine import EngineConfig, EstimatorEngine
+    from gpf_nav.ros import diagnostics as diag
+
+    scenario = generate(ScenarioConfig(case=case, epsilon=0.0, duration=150.0), 0)
+    model = filter_model(scenario.config)
+    config = EngineConfig(initial_state=scenario.prior_mean, initial_std=np.sqrt(np.diag(scenario.prior_cov)),
+                          initial_stamp=scenario.start_time)
+    engine = EstimatorEngine(lambda: make_filter("gpf", model, n_particles=200, seed=1), model, config,
+                             lambda: 0.0)
+    for k in range(scenario.times.size):
+        stamp = int(round(scenario.times[k] * 1e9))
+        assert engine.measurement(stamp, scenario.measurements[k], None) == (True, "")
+    level, message, values = diag.filter_status(engine, stamp, diag.Thresholds(costate_warn=1e12), "gpf")
+    kv = dict(values)
+    if warns:
+        assert level == diag.WARN and "3 undetermined directions" in message
+        assert kv["observability"] == "UNDETERMINED" and kv["observability undetermined directions"] == "3"
+        assert {"observability direction 1", "observability direction 3"} <= set(kv)
+    else:
+        assert "undetermined" not in message and level == diag.OK, message
+        assert kv["observability"] == "determined" and kv["observability undetermined directions"] == "0"
