@@ -106,6 +106,9 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
             (:meth:`ParticleFilter.update`; the kernel of the cloud metric moves the particles between
             stages); default :data:`TEMPERING_ESS`, 0 turns it off. The other metrics have no move
             between stages and take 0 only.
+        observability_constraint: the update keeps the prediction along the directions the data carried
+            less information about than this fraction of the prior's (:class:`ParticleFilter`); default
+            :data:`OBSERVABILITY_CONSTRAINT` for the cloud metric, 0 (off) for the others.
         resampling: resampling scheme name.
         ess_threshold: tau in (0, 1].
         seed: seed of the filter's random generator.
@@ -122,7 +125,7 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
                  resampling: str = "systematic",
                  ess_threshold: float = 0.5, seed: int | np.random.Generator | None = None,
                  collapse_steps: int = 0, tempering_ess: float | None = None,
-                 linearization: str = "mean", observability_constraint: float | None = None):
+                 observability_constraint: float | None = None):
         if reference not in REFERENCES:
             raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r}")
         if weighting not in WEIGHTINGS:
@@ -158,7 +161,6 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         self._proposal = None
         self._moment_target = None
         self.moment_matching = bool(moment_matching)
-        self.linearization = linearization
         self._init_gate(outlier_gate, outlier_gate_limit)  # (gating.py)
 
     def initialize(self, mean, cov, t0=0.0):
@@ -187,8 +189,6 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         """
         if self.metric != "cloud" or not rows.any():
             return super()._sample(x_pred, y, rows, dt)
-        if self.linearization == "particle":
-            return self._sample_local(x_pred, y, rows, dt)
         mean, centres, D = shrink(x_pred, self._weights, self.kernel_bandwidth)
         if dt > 0.0:
             D += self.model.process_noise(dt, self._pending_t)
@@ -249,76 +249,6 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         correction -= sum(map(math.log, R.diagonal().tolist()))  # log det U
         return x, correction, used
 
-    def _sample_local(self, x_pred, y, rows, dt):
-        """Cloud metric, each kernel linearised at its own centre (see :meth:`_sample`)."""
-        mean, centres, D = shrink(x_pred, self._weights, self.kernel_bandwidth)
-        if dt > 0.0:
-            D += self.model.process_noise(dt, self._pending_t)
-        C = cholesky_or_none(D, symmetric=True) if np.isfinite(D).all() else None
-        if C is None:
-            self._set_costate(None, rows, dt)
-            return ParticleFilter._sample(self, x_pred, y, rows, dt)
-        n, eps, N = self.model.state_dim, self.regularization, self.n_particles
-        sensor = self._sensor
-        h, H = sensor.measure_and_jacobian(centres.T, self.time)  # (N, m), (N, m, n)
-        r = sensor.residual(y, h)  # (N, m)
-        local = self._local_whitened(H, r, rows, D)
-        if local is None:
-            self._set_costate(None, rows, dt)
-            return ParticleFilter._sample(self, x_pred, y, rows, dt)
-        G, wr, A, S, Sinv = local
-        costate = (np.einsum("nij,nj->ni", Sinv, wr) / (dt if dt > 0.0 else 1.0), rows, 1.0)
-        S_mean = np.einsum("n,nij->ij", self._weights, S)
-        used = self._gate(self._weights @ wr, S_mean, rows, sensor.name) if self._first_draw else rows
-        self._set_costate(*costate)
-        if not used.any():
-            x, correction, _ = ParticleFilter._sample(self, x_pred, y, used, dt)
-            return x, correction, used
-        if used is not rows:
-            G, wr, A, S, Sinv = self._local_whitened(H, r, used, D)
-        k = wr.shape[1]
-        K = np.einsum("nik,nkj->nij", A, Sinv)  # (N, n, k)
-        z = antithetic_normals(self.rng, n, N)
-        zeta = antithetic_normals(self.rng, k, N)
-        Cz = C @ z  # (n, N)
-        v = wr.T + math.sqrt(eps) * zeta - np.einsum("nkj,jn->kn", G, Cz)  # (k, N)
-        x = centres + Cz + np.einsum("nik,kn->in", K, v)
-        proposal_means = centres + np.einsum("nik,nk->in", K, wr)
-        if self.moment_matching:
-            L = np.linalg.cholesky(S)  # (N, k, k)
-            B = np.einsum("nik,njk->nij", A, np.linalg.inv(L))  # A L^-T, (N, n, k)
-            pair = np.concatenate([proposal_means, x])
-            self._proposal = (pair, (D, B))
-        if self.weighting == "likelihood":
-            return x, 0.0, used
-        # log N(x; centre, D) - log q(x) = log N(W r; 0, S) - log N(W r - G (x - centre); 0, eps I)
-        e = wr.T - np.einsum("nkj,jn->kn", G, x - centres)  # (k, N)
-        quad_r = np.einsum("nk,nkj,nj->n", wr, Sinv, wr)
-        logdet_S = np.linalg.slogdet(S)[1]
-        correction = -0.5 * quad_r - 0.5 * logdet_S + 0.5 * np.einsum("kn,kn->n", e, e) / eps \
-            + 0.5 * k * math.log(eps)
-        return x, correction, used
-
-    def _local_whitened(self, H, r, rows, D):
-        """Per particle: ``(G = W H_i (N, k, n), W r_i (N, k), D G^T (N, n, k), S_i (N, k, k), S_i^-1)``."""
-        H = H[:, rows] if not rows.all() else H
-        r = r[:, rows] if not rows.all() else r
-        W = self._whitener(rows)
-        if W.ndim == 1:
-            G, wr = H * W[None, :, None], r * W[None, :]
-        else:
-            G, wr = np.einsum("ij,njk->nik", W, H), r @ W.T
-        A = np.einsum("ij,nkj->nik", D, G)  # D G^T
-        S = np.einsum("nkj,njl->nkl", G, A)
-        S += self.regularization * np.eye(S.shape[1])
-        if not (np.isfinite(S).all() and (np.einsum("nii->n", S) < ILL_CONDITIONED * self.regularization).all()):
-            return None
-        try:
-            Sinv = np.linalg.inv(S)
-        except np.linalg.LinAlgError:
-            return None
-        return G, wr, A, S, Sinv
-
     def _whitened(self, H: np.ndarray, r: np.ndarray, rows: np.ndarray, C: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """``(G = W H C (k, n), W r (k, N), S = G G^T + eps I (k, k), L^-1 (k, k))`` (``S = L L^T``) of the
@@ -351,9 +281,6 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
             return
         pair, spread = self._proposal  # the proposal means and the particles (self._x is pair[n:])
         self._proposal = None
-        if isinstance(spread, tuple):  # per-particle proposals: D - sum_i w_i B_i B_i^T
-            D, B = spread
-            spread = D - np.einsum("n,nik,njk->ij", self._weights, B, B)
         n = spread.shape[0]
         means, d, cov, current = paired_moments(pair, self._weights, n)
         mean = means[:n]

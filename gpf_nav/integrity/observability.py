@@ -53,6 +53,7 @@ class ObservabilityReport:
             smallest first.
         threshold: the information below which a direction is undetermined.
         updates: measurement updates the tracker has seen since the prior.
+        elapsed: time predicted over since the prior, s.
         scale: ``(n,)`` the no-data standard deviations the information is measured in.
         eigenvectors: ``(n, n)`` every direction (rows, state units), in the order of ``information``.
     """
@@ -62,6 +63,7 @@ class ObservabilityReport:
     information: np.ndarray
     threshold: float
     updates: int
+    elapsed: float = 0.0
     scale: np.ndarray = field(repr=False, default=None)
     eigenvectors: np.ndarray = field(repr=False, default=None)
 
@@ -110,6 +112,7 @@ class ObservabilityTracker:
         self._report: ObservabilityReport | None = None
         self._noise: tuple[float, np.ndarray] | None = None
         self.updates = 0
+        self.elapsed = 0.0
         self.reanchors = 0
 
     def reset(self, mean: np.ndarray, cov: np.ndarray) -> None:
@@ -118,6 +121,7 @@ class ObservabilityTracker:
         self._reference = np.array(mean, dtype=float)
         self._free, self._data = cov, cov.copy()
         self.updates = 0
+        self.elapsed = 0.0
         self._report = None
 
     @property
@@ -144,6 +148,7 @@ class ObservabilityTracker:
         if not (np.isfinite(F).all() and np.isfinite(Q).all() and np.isfinite(reference).all()):
             return
         self._reference = reference
+        self.elapsed += dt
         self._free = _symmetric(F @ self._free @ F.T + Q)
         self._data = _symmetric(F @ self._data @ F.T + Q)
         self._report = None
@@ -225,8 +230,8 @@ class ObservabilityTracker:
         vectors = vectors / np.linalg.norm(vectors / s, axis=1, keepdims=True)
         if not (np.isfinite(information).all() and np.isfinite(vectors).all()):
             return None
-        return ObservabilityReport(d, vectors[:d], information, self.threshold, self.updates, scale=s,
-                                   eigenvectors=vectors)
+        return ObservabilityReport(d, vectors[:d], information, self.threshold, self.updates, self.elapsed,
+                                   scale=s, eigenvectors=vectors)
 
 
 def _symmetric(a: np.ndarray) -> np.ndarray:

@@ -7,9 +7,10 @@ and the thresholds; :func:`to_msg` turns that into ``diagnostic_msgs/DiagnosticA
   or the co-state integrity monitor is at FAULT (held ``monitor_hold`` s);
 * WARN: not initialised yet; ESS/N below ``ess_warn_threshold``; mean co-state norm above
   ``costate_warn_threshold``; no measurement accepted for ``sensor_timeout`` s (node clock); the
-  integrity monitor at WARN (held ``monitor_hold`` s); or a direction of the state the measurements have
-  not determined (the observability report, :mod:`gpf_nav.integrity.observability`: along it the
-  estimate is the prior's, whatever the covariance's size);
+  integrity monitor at WARN (held ``monitor_hold`` s); or, from :data:`OBSERVABILITY_WARN_AFTER` s after
+  the prior, a direction of the state the measurements have not determined (the observability report,
+  :mod:`gpf_nav.integrity.observability`: along it the estimate is the prior's, whatever the
+  covariance's size);
 * OK otherwise.
 
 The message names every cause (``filter re-initialised (...)``, ``integrity FAULT: ...``), so an ERROR
@@ -81,7 +82,8 @@ def filter_status(engine, now_ns: int | None, thresholds: Thresholds, filter_nam
         level = max(level, INTEGRITY_LEVEL[report.level])
         problems.append(_integrity_problem(report))
     observability = engine.observability() if hasattr(engine, "observability") else None
-    if observability is not None and observability.undetermined:
+    if (observability is not None and observability.undetermined
+            and observability.elapsed >= OBSERVABILITY_WARN_AFTER):
         level = max(level, WARN)
         problems.append(f"{observability.undetermined} undetermined direction"
                         f"{'s' if observability.undetermined > 1 else ''}: "
@@ -123,6 +125,10 @@ def filter_status(engine, now_ns: int | None, thresholds: Thresholds, filter_nam
     return level, message, values
 
 
+OBSERVABILITY_WARN_AFTER = 100.0
+"""s of filter time after its prior before an undetermined direction is a WARN: a good prior knows the
+velocity better than the first minute of measurements, and that is no fault (the values show the report
+from the start)."""
 STATE_NAMES = ("px", "py", "pz", "vx", "vy", "vz")
 """Names of the user's state components in the reports (position, velocity; world frame)."""
 
@@ -141,7 +147,8 @@ def observability_values(report) -> list[tuple[str, str]]:
               ("observability undetermined directions", str(report.undetermined)),
               ("observability threshold", _fmt(report.threshold)),
               ("observability smallest information", _fmt(float(report.information[0]))),
-              ("observability updates", str(report.updates))]
+              ("observability updates", str(report.updates)),
+              ("observability elapsed [s]", _fmt(float(report.elapsed)))]
     for i, text in enumerate(report.describe(state_names(report.information.size)), 1):
         values.append((f"observability direction {i}", text))
     return values
