@@ -106,3 +106,27 @@ def test_conditions_beyond_the_envelope_run_only_when_named(tmp_path):
     assert report["conditions"]["dropouts"]["filters"]["EKF"]["runs"] == 2
     with pytest.raises(SystemExit):
         cli.main(["stress", "--conditions", "no-such-condition", "--out", str(out)] + TINY)
+
+
+def test_honesty_command_reports_bound_share_verdicts_and_monitor(tmp_path):
+    """``gpf-nav honesty`` on tiny runs (150 s: the verdicts start at 100 s): every condition and filter,
+    and the report's verdicts where the scenario knows the answer (range only: three rotations; full
+    case: none)."""
+    args = ["honesty", "--runs", "1", "--duration", "150", "--particles", "40", "--no-progress", "--workers", "1",
+            "--filters", "ekf,gpf-paper", "--conditions", "full,range-only,large-prior-partial", "--out", str(tmp_path)]
+    assert cli.main(args) == 0
+    report = json.loads((tmp_path / "honesty.json").read_text())
+    assert report["schema"] == "gpf_nav.honesty/1" and list(report["conditions"]) == [
+        "full", "range-only", "large-prior-partial"]
+    for name, entry in report["conditions"].items():
+        for row in entry["filters"].values():
+            assert 0.0 <= row["above_bound_mean"] <= 1.0 and 0.0 <= row["consistency_fault_share"] <= 1.0
+            assert row["named_share_mean"] == 1.0, (name, row)  # EKF and the paper's GPF: the right subspace
+            assert row["undetermined_share_mean"] == (0.0 if name == "full" else 1.0)
+    assert "| full case (control) | EKF |" in (tmp_path / "honesty.md").read_text()
+
+
+def test_honesty_refuses_an_unknown_condition(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["honesty", "--conditions", "full,nope", "--out", str(tmp_path)])
+    assert exc.value.code == 2 and "nope" in capsys.readouterr().err
