@@ -4,7 +4,7 @@
     gpf-nav montecarlo   the paper's Monte Carlo table (``gpf_nav.experiments.montecarlo``)
     gpf-nav sweep        mismatch / noise sweeps (``gpf_nav.experiments.sweep``)
     gpf-nav stress       large prior, range only, outliers, bias, prior size (``gpf_nav.experiments.stress``)
-    gpf-nav integrity    co-state monitor false alarms and detection delays (``gpf_nav.experiments.integrity``)
+    gpf-nav integrity    co-state monitor false alarms and detection delays (``gpf_nav.experiments.integrity_campaign``)
     gpf-nav honesty      covariance honesty where the data cannot determine the state, observability
                          report and consistency monitor (``gpf_nav.experiments.honesty``)
     gpf-nav sensors      rae only against the full sensor suite (``gpf_nav.experiments.sensor_campaign``)
@@ -32,7 +32,7 @@ COMMANDS = {
     "sweep": "gpf_nav.experiments.sweep",
     "stress": "gpf_nav.experiments.stress",
     "demo": "gpf_nav.tools.demo",
-    "integrity": "gpf_nav.experiments.integrity",
+    "integrity": "gpf_nav.experiments.integrity_campaign",
     "honesty": "gpf_nav.experiments.honesty",
     "sensors": "gpf_nav.experiments.sensor_campaign",
     "record": "gpf_nav.bags.record",

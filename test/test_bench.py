@@ -43,7 +43,7 @@ def test_bench_steps_follow_the_measurements_in_order():
     from dataclasses import replace
 
     from gpf_nav.filters import GeometricProjectionPF
-    from gpf_nav.scenario import ScenarioConfig, filter_model, generate
+    from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 
     config = replace(ScenarioConfig(), duration=2.0 * (bench.WARMUP + 2 * 10 + 1))
     scenario, model = generate(config, 0), filter_model(config)
@@ -78,7 +78,7 @@ class _Recorder:
 def test_filters_of_a_group_are_timed_in_turn_each_on_its_own_measurements_in_order():
     from dataclasses import replace
 
-    from gpf_nav.scenario import ScenarioConfig, filter_model, generate
+    from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 
     config = replace(ScenarioConfig(), duration=2.0 * (bench.WARMUP + 3 * 4 + 1))
     scenario = generate(config, 0)

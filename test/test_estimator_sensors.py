@@ -1,4 +1,4 @@
-"""The estimator's new inputs through :class:`EstimatorCore` and real ROS messages (no DDS):
+"""The estimator's new inputs through :class:`MessageLayer` and real ROS messages (no DDS):
 measurements/position, measurements/velocity and measurements/altitude are fused, a late TRN fix is
 fused at its stamp, bad input on every new topic is refused with its reason in /diagnostics, and an
 estimated range bias is reported."""
@@ -15,9 +15,9 @@ from sensor_msgs.msg import Range  # noqa: E402
 from gpf_nav.estimator.params import ESTIMATOR, ParameterError, parameters_from_files  # noqa: E402
 from gpf_nav.ros import conversions as conv  # noqa: E402
 from gpf_nav.ros import diagnostics as diag  # noqa: E402
-from gpf_nav.ros.estimator_core import EstimatorCore  # noqa: E402
-from gpf_nav.scenario import ScenarioConfig, generate  # noqa: E402
-from gpf_nav.sensor_suite import SuiteConfig, generate_suite  # noqa: E402
+from gpf_nav.ros.message_layer import MessageLayer  # noqa: E402
+from gpf_nav.sim.scenario import ScenarioConfig, generate  # noqa: E402
+from gpf_nav.sim.sensor_suite import SuiteConfig, generate_suite  # noqa: E402
 
 S = 1_000_000_000
 T0 = 1000 * S
@@ -75,7 +75,7 @@ def _core(scenario, *assignments):
         f"initial_std:={[float(v) for v in np.sqrt(np.diag(scenario.prior_cov))]}",
         f"initial_stamp:={T0 * 1e-9}", *assignments])
     out = []
-    return EstimatorCore(p, lambda topic, msg: out.append((topic, msg)), _Log()), out
+    return MessageLayer(p, lambda topic, msg: out.append((topic, msg)), _Log()), out
 
 
 def _data():

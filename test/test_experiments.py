@@ -8,7 +8,7 @@ import pytest
 from gpf_nav import cli
 from gpf_nav.experiments import montecarlo, runner
 from gpf_nav.experiments.parallel import map_tasks
-from gpf_nav.scenario import ScenarioConfig
+from gpf_nav.sim.scenario import ScenarioConfig
 
 SHORT = ["--duration", "100", "--no-progress"]  # 50 filter steps instead of 1200
 

@@ -232,7 +232,7 @@ def test_degenerate_reference_does_not_raise():
 def _lunar_fault_fraction(epsilon: float, **options) -> tuple[float, object]:
     """Fraction of ready steps at FAULT for a GPF (100 particles) on the lunar descent, and the filter."""
     from gpf_nav.filters import GeometricProjectionPF
-    from gpf_nav.scenario import ScenarioConfig, filter_model, generate
+    from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 
     config = ScenarioConfig(epsilon=epsilon)
     scenario = generate(config, 3)

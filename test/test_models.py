@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from gpf_nav.models import LinearGaussianModel, LunarDescentModel
-from gpf_nav.models.base import wrap_angle
+from gpf_nav.models.state_space import wrap_angle
 
 
 def _states(rng: np.random.Generator, n: int = 8) -> np.ndarray:

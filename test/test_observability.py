@@ -17,7 +17,7 @@ from gpf_nav.estimator.factory import FILTERS, make_filter
 from gpf_nav.filters import ExtendedKF, GeometricProjectionPF
 from gpf_nav.integrity import ConsistencyMonitor, ObservabilityTracker, innovation_moments
 from gpf_nav.models import LinearGaussianModel
-from gpf_nav.scenario import ScenarioConfig, filter_model, generate, undetermined_subspace
+from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate, undetermined_subspace
 from gpf_nav.sensors.model import ModelSensor
 from linear_reference import kalman, simulate
 

@@ -32,7 +32,7 @@ from nav_msgs.msg import Odometry  # noqa: E402
 from gpf_nav.ros import conversions as conv  # noqa: E402
 from gpf_nav.bags.bag import BagReader, deserialize  # noqa: E402
 from gpf_nav.estimator.params import ESTIMATOR, ParameterError, parameters_from_files, simulator_specs  # noqa: E402
-from gpf_nav.playback import build_events  # noqa: E402
+from gpf_nav.sim.playback import build_events  # noqa: E402
 from gpf_nav.bags.record import record  # noqa: E402
 from gpf_nav.bags.replay import REPLAY_PARAMETERS, replay  # noqa: E402
 from gpf_nav.ros.simulator_node import (EVENT_TOPICS, event_message, handover_message,  # noqa: E402
@@ -252,7 +252,7 @@ def test_round_trip_sqlite3_read_back_by_rosbags(tmp_path):
     with BagReader(bag) as reader:
         assert "/set_state" not in reader.topics and reader.counts["/clock"] > 0
     # the partial case never measures azimuth: no batch initialisation, the prior as initial_state
-    from gpf_nav.scenario import ScenarioConfig, generate
+    from gpf_nav.sim.scenario import ScenarioConfig, generate
     prior = generate(ScenarioConfig(duration=60.0, case="partial"), 3)
     out = tmp_path / "out"
     r = _cli("replay", bag, "--out", out, "--storage", "sqlite3", "--no-progress", "--no-figure", "-p", "filter:=ekf",
@@ -283,7 +283,7 @@ def _garbage_bag(path: Path, topic: str):
     Returns (expected rejections by reason, expected masked components, undecodable messages)."""
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
-    from gpf_nav.scenario import ScenarioConfig, generate
+    from gpf_nav.sim.scenario import ScenarioConfig, generate
     ts = get_typestore(Stores.ROS2_JAZZY)
     T, H = ts.types["builtin_interfaces/msg/Time"], ts.types["std_msgs/msg/Header"]
     V3, VS = ts.types["geometry_msgs/msg/Vector3"], ts.types["geometry_msgs/msg/Vector3Stamped"]
@@ -488,7 +488,7 @@ def test_unusable_input_is_refused_in_one_line_with_status_2(tmp_path, recorded)
 def test_simulator_disturbance_parameter_is_the_scenarios():
     """``scenario.disturbance`` reaches the simulator's truth as the scenario's hidden acceleration: the
     same truth as ``generate`` with it, and a different one from the undisturbed run."""
-    from gpf_nav.scenario import ScenarioConfig, generate
+    from gpf_nav.sim.scenario import ScenarioConfig, generate
 
     push = [0.0, 0.06, -0.08]
     config, scenario = scenario_from_parameters(_sim_params(**{"scenario.disturbance": push}))

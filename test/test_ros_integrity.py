@@ -16,7 +16,7 @@ import pytest
 from gpf_nav.ros import diagnostics as diag
 from gpf_nav.estimator.engine import EngineConfig, EstimatorEngine
 from gpf_nav.estimator.factory import make_filter
-from gpf_nav.scenario import ScenarioConfig, filter_model, generate
+from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 
 S = 1_000_000_000
 CLEAN = ScenarioConfig(duration=300.0, epsilon=0.0)  # the filter's model is the truth's: no mismatch

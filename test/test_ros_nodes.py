@@ -33,7 +33,7 @@ from gpf_nav.ros.diagnostics import STATUS_NAME, parse_values  # noqa: E402
 from gpf_nav.ros.estimator_node import EstimatorNode  # noqa: E402
 from gpf_nav.estimator.params import ParameterError  # noqa: E402
 from gpf_nav.ros.simulator_node import SimulatorNode  # noqa: E402
-from gpf_nav.scenario import ScenarioConfig, generate  # noqa: E402
+from gpf_nav.sim.scenario import ScenarioConfig, generate  # noqa: E402
 
 S = 1_000_000_000
 

@@ -28,8 +28,8 @@ from gpf_nav.ros import conversions as conv  # noqa: E402
 from gpf_nav.ros.diagnostics import STATUS_NAME, parse_values  # noqa: E402
 from gpf_nav.ros.estimator_node import EstimatorNode  # noqa: E402
 from gpf_nav.ros.simulator_node import SimulatorNode  # noqa: E402
-from gpf_nav.scenario import ScenarioConfig, generate  # noqa: E402
-from gpf_nav.sensor_suite import SuiteConfig, generate_suite  # noqa: E402
+from gpf_nav.sim.scenario import ScenarioConfig, generate  # noqa: E402
+from gpf_nav.sim.sensor_suite import SuiteConfig, generate_suite  # noqa: E402
 from test_estimator_sensors import BAD, altitude_msg, position_msg, velocity_msg  # noqa: E402
 
 S = 1_000_000_000

@@ -6,12 +6,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gpf_nav.estimator import validation as val
+from gpf_nav.estimator import input_checks as val
 from gpf_nav.estimator.engine import EngineConfig, EstimatorEngine
 from gpf_nav.estimator.factory import FILTERS, make_filter, make_lunar_model
 from gpf_nav.estimator.initialization import batch_initial_state, inverse_rae
-from gpf_nav.playback import build_events, hermite_state
-from gpf_nav.scenario import ScenarioConfig, filter_model, generate
+from gpf_nav.sim.playback import build_events, hermite_state
+from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 
 ROOT = Path(__file__).resolve().parents[1]
 SHORT = ScenarioConfig(duration=60.0)
@@ -407,6 +407,6 @@ def test_playback_is_deterministic_and_ordered():
 def test_hermite_interpolation_matches_the_orbit():
     s = generate(ScenarioConfig(duration=4.0, truth_accel_noise_density=0.0), 0)
     mid = hermite_state(0.0, s.truth[0], 2.0, s.truth[1], 1.0)
-    from gpf_nav.scenario import truth_model
+    from gpf_nav.sim.scenario import truth_model
     exact = truth_model(s.config).transition(s.truth[:1], 1.0)[0]
     assert np.linalg.norm(mid[:3] - exact[:3]) < 0.05 and np.linalg.norm(mid[3:] - exact[3:]) < 0.05

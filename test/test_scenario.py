@@ -1,4 +1,4 @@
-"""Tests of the lunar-descent scenario generator (gpf_nav.scenario)."""
+"""Tests of the lunar-descent scenario generator (gpf_nav.sim.scenario)."""
 import dataclasses
 import math
 from pathlib import Path
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from gpf_nav.models.lunar import MOON_RADIUS, MU_MOON, LunarDescentModel
-from gpf_nav.scenario import (Scenario, ScenarioConfig, filter_model, generate, load_csv,
+from gpf_nav.sim.scenario import (Scenario, ScenarioConfig, filter_model, generate, load_csv,
                               parse_flat_yaml, save_csv, truth_model)
 
 CONFIG_FILE = Path(__file__).resolve().parents[1] / "config" / "scenario.yaml"

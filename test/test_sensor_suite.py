@@ -11,8 +11,8 @@ from gpf_nav import cli
 from gpf_nav.experiments import sensor_campaign
 from gpf_nav.experiments.runner import ALIASES, _make_filter
 from gpf_nav.models.lunar import MOON_RADIUS
-from gpf_nav.scenario import ScenarioConfig, filter_model, generate
-from gpf_nav.sensor_suite import SuiteConfig, generate_suite
+from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
+from gpf_nav.sim.sensor_suite import SuiteConfig, generate_suite
 
 
 def test_the_suites_data_rates_noise_availability_and_latency():

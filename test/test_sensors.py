@@ -14,7 +14,7 @@ from gpf_nav.filters import (BootstrapPF, EnsembleKF, ExtendedKF, GeometricProje
                              SensorBiasFilter, UnscentedKF)
 from gpf_nav.models import LinearGaussianModel, LunarDescentModel
 from gpf_nav.models.lunar import MOON_RADIUS
-from gpf_nav.scenario import ScenarioConfig, filter_model, generate
+from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 from gpf_nav.sensors import (AltitudeSensor, ModelSensor, PositionSensor, VelocitySensor, gauss_markov_bias,
                              random_constant_bias)
 

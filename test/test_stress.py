@@ -8,7 +8,7 @@ import pytest
 from gpf_nav import cli
 from gpf_nav.experiments import runner, stress
 from gpf_nav.filters import ExtendedKF
-from gpf_nav.scenario import ScenarioConfig, filter_model, generate
+from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 
 TINY = ["--runs", "2", "--duration", "40", "--particles", "40", "--no-progress"]  # 20 steps per run
 FILTERS = (runner.GPF_NAV, runner.GPF_SINGLE, runner.EKF_COMPENSATED_GATED, "EKF", "EKF, oracle-tuned Q")

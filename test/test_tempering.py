@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from gpf_nav.filters import GeometricProjectionPF, MultipleModelGPF
-from gpf_nav.scenario import ScenarioConfig, filter_model, generate
+from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 
 from linear_reference import constant_velocity_model, kalman, simulate
 

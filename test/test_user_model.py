@@ -5,7 +5,7 @@ import pytest
 from examples import bearings_only, bearings_only_peers, growth_model
 from gpf_nav.filters import BootstrapPF, EnsembleKF, ExtendedKF, GeometricProjectionPF, UnscentedKF
 from gpf_nav.models import LinearGaussianModel
-from gpf_nav.models.validation import validate_model
+from gpf_nav.models.checks import validate_model
 
 BearingsOnlyModel = bearings_only.BearingsOnlyModel
 PRIOR = (bearings_only.PRIOR_MEAN, bearings_only.PRIOR_COV)

@@ -37,7 +37,7 @@ def run(filter_name: str = "gpf", steps: int = 60, seed: int = 1) -> tuple[float
     """Fly the paper's descent with the model's range/azimuth/elevation and a beacon range every step;
     return the final position error, m, with the beacon and without it."""
     from gpf_nav.experiments.runner import ALIASES, _make_filter
-    from gpf_nav.scenario import MOON_RADIUS, ScenarioConfig, filter_model, generate
+    from gpf_nav.sim.scenario import MOON_RADIUS, ScenarioConfig, filter_model, generate
 
     config = ScenarioConfig(duration=steps * 2.0, case="partial")
     scenario = generate(config, seed)

@@ -1,7 +1,7 @@
 """``gpf-nav record OUT``: the simulator's scenario written as a rosbag2 bag, without running ROS.
 
 The same parameters (``config/simulator.yaml``, ``-p name:=value``), events
-(:func:`gpf_nav.playback.build_events`) and messages (:func:`gpf_nav.ros.simulator_node.event_message`)
+(:func:`gpf_nav.sim.playback.build_events`) and messages (:func:`gpf_nav.ros.simulator_node.event_message`)
 as ``ros2 run gpf_nav simulator`` at ``rate_factor`` 1, only as fast as the disk allows. With
 ``publish_clock: true`` (the default):
 
@@ -66,7 +66,7 @@ def record(out: str, p: dict, storage: str = "mcap") -> dict:
     from rosgraph_msgs.msg import Clock
 
     from gpf_nav.ros import conversions as conv
-    from gpf_nav.playback import NS
+    from gpf_nav.sim.playback import NS
     from gpf_nav.ros.simulator_node import (EVENT_TOPICS, HANDOVER_TOPIC, QOS_DEPTH, check_simulator_parameters,
                                             event_message, events_from_parameters, handover_message,
                                             scenario_from_parameters)

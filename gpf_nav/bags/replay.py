@@ -1,10 +1,10 @@
 """``gpf-nav replay BAG --out DIR``: the estimator run offline over a rosbag2 bag, as fast as the CPU allows.
 
-The estimator node's own message handling (:class:`gpf_nav.ros.estimator_core.EstimatorCore`: same
+The estimator node's own message handling (:class:`gpf_nav.ros.message_layer.MessageLayer`: same
 parameters, checks, counters and outputs) is fed the bag's messages in recording order, with no ROS
 graph and no waiting:
 
-* inputs: the node's topics (:data:`gpf_nav.ros.estimator_core.INPUT_TOPICS`: ``measurements/rae``,
+* inputs: the node's topics (:data:`gpf_nav.ros.message_layer.INPUT_TOPICS`: ``measurements/rae``,
   ``measurements/range``, ``measurements/position``, ``measurements/velocity``, ``measurements/altitude``,
   ``imu``, ``set_pose``, ``set_state``) (the prior ``gpf-nav record`` writes at the start, as the simulator hands it over), plus
   ``truth/odometry`` for the evaluation; each remappable (``--remap measurements/rae:=/tracking/rae``);
@@ -45,7 +45,7 @@ from gpf_nav.arguments import CommandParser
 from gpf_nav.bags.bag import (STORAGES, BagError, BagReader, BagWriter, absolute, deserialize,
                              header_stamp_ns, qos_profile, type_name)
 from gpf_nav.ros.conversions import odometry_state, stamp_to_ns
-from gpf_nav.ros.estimator_core import INPUT_TOPICS, OUTPUT_TOPICS, EstimatorCore
+from gpf_nav.ros.message_layer import INPUT_TOPICS, OUTPUT_TOPICS, MessageLayer
 from gpf_nav.estimator.params import ESTIMATOR, ParameterError, Spec, parameters_from_files
 from gpf_nav.bags.replay_report import print_summary, summarize
 
@@ -192,7 +192,7 @@ def _run(reader, out_bag, params, name, present, storage, particles, progress) -
             if topic == "odometry/filtered" and clock["update"]:
                 updates.append((stamp_to_ns(msg.header.stamp), core.engine.mean.copy(), core.engine.cov.copy()))
 
-        core = EstimatorCore(params, publish, log, monotonic=lambda: clock["rec"] * 1e-9,
+        core = MessageLayer(params, publish, log, monotonic=lambda: clock["rec"] * 1e-9,
                              wants_particles=lambda: particles)
         log.info(core.describe() + (" (node clock: /clock of the bag)" if sim_time else
                                     " (node clock: recording time)"))

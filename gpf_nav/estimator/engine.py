@@ -1,7 +1,7 @@
 """The estimator's logic without ROS: timing, initialisation, IMU input, recovery, counters.
 
 :class:`EstimatorEngine` is what ``estimator_node`` drives; the node only converts messages, applies
-the message-level checks of :mod:`gpf_nav.estimator.validation` and publishes. Times are integer nanoseconds
+the message-level checks of :mod:`gpf_nav.estimator.input_checks` and publishes. Times are integer nanoseconds
 of ROS time. Rules:
 
 * A measurement at stamp ``t`` runs ``predict((t - t_filter) s, u)`` then ``update(y, sensor)``, ``u`` being
@@ -51,7 +51,7 @@ from gpf_nav.integrity import CostateMonitor, IntegrityStatus
 from gpf_nav.estimator.history import Entry, History
 from gpf_nav.estimator.initialization import batch_initial_state
 from gpf_nav.sensors import innovation_distance
-from gpf_nav.estimator.validation import Counters, RateLimiter, check_timing
+from gpf_nav.estimator.input_checks import Counters, RateLimiter, check_timing
 
 NS = 1_000_000_000
 IMU_SAMPLES = 4096

@@ -156,7 +156,7 @@ SUITE_DESCRIPTIONS = {
 
 def simulator_specs() -> list[Spec]:
     """The simulator's table: its own parameters plus ``scenario.<field>`` for every ScenarioConfig field."""
-    from gpf_nav.scenario import ScenarioConfig
+    from gpf_nav.sim.scenario import ScenarioConfig
     base = ScenarioConfig()
     specs = [
         Spec("seed", 0, "Scenario seed: same seed, same messages."),
@@ -183,7 +183,7 @@ def simulator_specs() -> list[Spec]:
         elif isinstance(default, tuple):
             default = [float(v) for v in default]
         specs.append(Spec("scenario." + name, default, description))
-    from gpf_nav.sensor_suite import SuiteConfig
+    from gpf_nav.sim.sensor_suite import SuiteConfig
     suite = SuiteConfig()
     specs += [Spec("publish_suite", False, "Also publish the sensor suite (suite.*): measurements/altitude, measurements/position (TRN, late by suite.trn_latency) and measurements/velocity."),
               Spec("altimeter_frame", "base_link", "frame_id of measurements/altitude.")]

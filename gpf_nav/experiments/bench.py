@@ -26,7 +26,7 @@ from gpf_nav import allocator
 from gpf_nav.arguments import CommandParser, positive_int
 from gpf_nav.filters import (BootstrapPF, EnsembleKF, ExtendedKF, GeometricProjectionPF, MultipleModelGPF,
                              UnscentedKF)
-from gpf_nav.scenario import ScenarioConfig, filter_model, generate
+from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 
 PARTICLE_COUNTS = (500, 10_000, 100_000)
 PAPER_GPF = {"metric": "euclidean", "weighting": "likelihood", "unmodelled_acceleration_std": 0.0}

@@ -24,7 +24,7 @@ import numpy as np
 from threadpoolctl import threadpool_info, threadpool_limits
 
 from gpf_nav.filters import BootstrapPF, GeometricProjectionPF
-from gpf_nav.scenario import ScenarioConfig, filter_model, generate
+from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 
 
 def _median_seconds(fn, repeats: int) -> float:

@@ -38,7 +38,7 @@ from gpf_nav.experiments.parallel import default_workers, map_tasks
 from gpf_nav.experiments.runner import (ALIASES, DEFAULT_PARTICLES, EXTRA_FILTERS, FILTERS, GPF_DEFAULT,
                                         GPF_NAV, GPF_PRINTED, PARTICLE_FILTERS, RunTask, run_task,
                                         select_oracle)
-from gpf_nav.scenario import CASES, ScenarioConfig
+from gpf_nav.sim.scenario import CASES, ScenarioConfig
 
 SCHEMA = "gpf_nav.montecarlo/1"
 CASE_NAMES = {"full": "Case 1 (full observability)", "partial": "Case 2 (partial observability)",

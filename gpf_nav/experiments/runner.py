@@ -22,7 +22,7 @@ import numpy as np
 
 from gpf_nav.experiments import metrics
 from gpf_nav.integrity import ConsistencyMonitor, innovation_moments
-from gpf_nav.scenario import ScenarioConfig, filter_model, generate, undetermined_subspace
+from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate, undetermined_subspace
 from gpf_nav.sensors.model import ModelSensor
 
 DEFAULT_PARTICLES = 500

@@ -1,7 +1,7 @@
 """Ground tracking alone against the descent's full sensor suite (``gpf-nav sensors``).
 
 Each Monte Carlo run flies one scenario twice per filter: ``rae`` fuses the station's range, azimuth and
-elevation only; ``full`` also fuses the suite of :mod:`gpf_nav.sensor_suite` (altimeter, TRN position
+elevation only; ``full`` also fuses the suite of :mod:`gpf_nav.sim.sensor_suite` (altimeter, TRN position
 fixes delivered late, velocimeter). A late TRN fix is fused at its stamp: the run keeps the filter as it
 was at the fix's capture (a copy, random generator included) and, when the fix arrives, fuses it there
 and re-applies what came after, as an estimator replaying its history does; the estimate scored at each
@@ -36,8 +36,8 @@ from gpf_nav.experiments.runner import ALIASES, DEFAULT_PARTICLES, _make_filter,
 from gpf_nav.filters import SensorBiasFilter
 from gpf_nav.filters.gating import OUTLIER_GATE_LIMIT
 from gpf_nav.models.lunar import MOON_RADIUS
-from gpf_nav.scenario import ScenarioConfig, filter_model, generate
-from gpf_nav.sensor_suite import SuiteConfig, SuiteData, generate_suite, suite_sensors
+from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
+from gpf_nav.sim.sensor_suite import SuiteConfig, SuiteData, generate_suite, suite_sensors
 from gpf_nav.sensors import ModelSensor, innovation_distance, random_constant_bias
 
 SCHEMA = "gpf_nav.sensor_campaign/1"
@@ -54,7 +54,7 @@ def fuse(flt, scenario, suite: SuiteData | None, fix_gate: float = 0.0) -> dict:
     At each step ``k``: ``predict``, the range/azimuth/elevation, then the altitude and the velocity when
     measured; TRN fixes are fused at their stamp when they arrive (module docstring). ``fix_gate`` in
     [0, 1): a fix whose squared Mahalanobis distance from the estimate at its stamp
-    (:func:`~gpf_nav.sensors.base.innovation_distance`) is beyond this quantile of the chi-square law
+    (:func:`~gpf_nav.sensors.sensor.innovation_distance`) is beyond this quantile of the chi-square law
     with three degrees of freedom is refused, unless the previous ``OUTLIER_GATE_LIMIT`` fixes were (then
     the estimate, not the fix, is taken to be off); 0 fuses every fix. Returns the per-step
     ``position_error`` (m), ``velocity_error`` (m/s), ``nees`` (six states), ``fixes`` (TRN fixes fused),
@@ -329,7 +329,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--filters", default=None,
                         help="comma-separated filters, short names as montecarlo's (default gpf,ekf-comp-gated)")
     parser.add_argument("--suite", action="append", default=[], metavar="KEY=VALUE",
-                        help="a sensor-suite setting (gpf_nav.sensor_suite.SuiteConfig), e.g. trn_latency=4")
+                        help="a sensor-suite setting (gpf_nav.sim.sensor_suite.SuiteConfig), e.g. trn_latency=4")
     parser.add_argument("--fix-gate", type=float, default=FIX_GATE, metavar="P",
                         help="refuse a TRN fix beyond this chi-square (3 dof) quantile of its Mahalanobis "
                              f"distance; 0 fuses every fix (default {FIX_GATE})")

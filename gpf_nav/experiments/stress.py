@@ -45,7 +45,7 @@ from gpf_nav.experiments.montecarlo import base_config, git_commit, parse_filter
 from gpf_nav.experiments.parallel import map_tasks
 from gpf_nav.experiments.runner import (ALIASES, DEFAULT_PARTICLES, PARTICLE_FILTERS, RunTask, run_task,
                                         select_oracle)
-from gpf_nav.scenario import ScenarioConfig
+from gpf_nav.sim.scenario import ScenarioConfig
 
 SCHEMA = "gpf_nav.stress/1"
 DEFAULT_FILTERS = "gpf,gpf-single,ekf-comp-gated,ekf,ekf-oracle"

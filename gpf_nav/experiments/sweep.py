@@ -37,7 +37,7 @@ from gpf_nav.experiments.montecarlo import (add_common_arguments, base_config, g
 from gpf_nav.experiments.parallel import map_tasks
 from gpf_nav.experiments.runner import (EXTRA_FILTERS, FILTERS, ORACLE_FAMILIES, PARTICLE_FILTERS, RunTask, run_task,
                                         select_oracle)
-from gpf_nav.scenario import ScenarioConfig
+from gpf_nav.sim.scenario import ScenarioConfig
 
 SCHEMA = "gpf_nav.sweep/2"
 COLUMNS = {"position_rmse_km": ("position_rmse", 1e-3), "velocity_rmse_mps": ("velocity_rmse", 1.0),

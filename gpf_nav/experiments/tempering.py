@@ -20,7 +20,7 @@ import numpy as np
 
 from gpf_nav.experiments.parallel import map_tasks
 from gpf_nav.experiments.runner import run_filter, run_seeds
-from gpf_nav.scenario import ScenarioConfig, filter_model, generate
+from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 
 VARIANTS = {
     "no tempering": {"tempering_ess": 0.0},

@@ -1,5 +1,5 @@
 """Filters behind one interface: the GPF, the bootstrap PF (SPF), EKF, UKF and EnKF."""
-from gpf_nav.filters.base import Filter
+from gpf_nav.filters.interface import Filter
 from gpf_nav.filters.biased import SensorBiasFilter
 from gpf_nav.filters.compensated import CompensatedEKF
 from gpf_nav.filters.ensemble import EnsembleKF

@@ -13,8 +13,8 @@ from typing import Callable
 
 import numpy as np
 
-from gpf_nav.models.base import StateSpaceModel
-from gpf_nav.sensors.base import Sensor
+from gpf_nav.models.state_space import StateSpaceModel
+from gpf_nav.sensors.sensor import Sensor
 from gpf_nav.sensors.bias import SensorBiasModel
 
 
@@ -24,7 +24,7 @@ class SensorBiasFilter:
     Args:
         build: builds the filter on a model, e.g. ``lambda m: GeometricProjectionPF(m, 500, seed=0)``.
         model: the user's state-space model.
-        sensors: the sensors whose declared :class:`~gpf_nav.sensors.base.Bias` is estimated (the
+        sensors: the sensors whose declared :class:`~gpf_nav.sensors.sensor.Bias` is estimated (the
             model's own measurement as ``ModelSensor(model, name, bias=...)``).
 
     Attributes:

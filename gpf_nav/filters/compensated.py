@@ -17,9 +17,9 @@ from gpf_nav.filters.gating import OUTLIER_GATE_LIMIT
 from gpf_nav.filters.kalman import ExtendedKF
 from gpf_nav.filters.model_averaging import NOMINAL_PRIOR, mixture_moments, model_average
 from gpf_nav.linalg import positive_definite
-from gpf_nav.models.base import StateSpaceModel
+from gpf_nav.models.state_space import StateSpaceModel
 from gpf_nav.models.compensation import ModelErrorCompensation
-from gpf_nav.models.validation import validate_model
+from gpf_nav.models.checks import validate_model
 
 UNMODELLED_ACCELERATION_STD = 0.1
 """Default stationary standard deviation of the unmodelled acceleration (state units / s^2; m/s^2)."""
@@ -28,7 +28,7 @@ UNMODELLED_ACCELERATION_TIME = 1.0e6
 
 
 class ModelErrorCompensated:
-    """Mixin for a :class:`~gpf_nav.filters.base.Filter` subclass (put it first in the bases)."""
+    """Mixin for a :class:`~gpf_nav.filters.interface.Filter` subclass (put it first in the bases)."""
 
     nominal_model: StateSpaceModel
     nominal_prior: float
@@ -119,7 +119,7 @@ class ModelErrorCompensated:
     def augmented_mean(self) -> np.ndarray:
         """Compensated posterior mean ``(n + p,)`` of the whole state (the user's state, then the
         unmodelled acceleration in the model's local frame when it declares one,
-        :meth:`~gpf_nav.models.base.StateSpaceModel.compensation_frame`)."""
+        :meth:`~gpf_nav.models.state_space.StateSpaceModel.compensation_frame`)."""
         return super().mean
 
     @property

@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpf_nav.filters.base import Filter
+from gpf_nav.filters.interface import Filter
 from gpf_nav.filters.kalman import ModelNoise, innovation_solve, readonly_view
 from gpf_nav.linalg import positive_definite, psd_sqrt
-from gpf_nav.models.base import StateSpaceModel
+from gpf_nav.models.state_space import StateSpaceModel
 
 
 class EnsembleKF(Filter):

@@ -44,7 +44,7 @@ from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
 from gpf_nav.filters.particle import ParticleFilter, gaussian_shift_correction, select_rows
 from gpf_nav.filters.projection import project
 from gpf_nav.linalg import cholesky_or_none, triangular_inverse
-from gpf_nav.models.base import StateSpaceModel
+from gpf_nav.models.state_space import StateSpaceModel
 
 REFERENCES = ("innovation", "increment")
 METRICS = ("cloud", "euclidean", "process_noise")

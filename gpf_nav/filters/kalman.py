@@ -10,10 +10,10 @@ import math
 import numpy as np
 from scipy.linalg.lapack import dposv, dpotrf
 
-from gpf_nav.filters.base import Filter
+from gpf_nav.filters.interface import Filter
 from gpf_nav.filters.gating import OUTLIER_GATE_LIMIT, InnovationGated
 from gpf_nav.linalg import positive_definite, psd_sqrt
-from gpf_nav.models.base import StateSpaceModel
+from gpf_nav.models.state_space import StateSpaceModel
 
 _LOG_2PI = math.log(2.0 * math.pi)
 

@@ -40,7 +40,7 @@ import numpy as np
 from gpf_nav.filters.gpf import GeometricProjectionPF
 from gpf_nav.filters.model_averaging import mixture_moments
 from gpf_nav.linalg import positive_definite
-from gpf_nav.models.base import StateSpaceModel
+from gpf_nav.models.state_space import StateSpaceModel
 
 SWITCH_TIME = 2.0e5
 """Default mean sojourn time of the model chain, s (switching probability 1e-5 per 2 s step)."""

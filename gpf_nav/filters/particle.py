@@ -25,12 +25,12 @@ import math
 import numpy as np
 
 from gpf_nav import resampling as resamplers
-from gpf_nav.filters.base import Filter
+from gpf_nav.filters.interface import Filter
 from gpf_nav.filters.kernel import match_moments, weighted_moments
 from gpf_nav.filters.projection import project
 from gpf_nav.linalg import cholesky_or_none, positive_definite, psd_sqrt
-from gpf_nav.models.base import StateSpaceModel
-from gpf_nav.sensors.base import Sensor
+from gpf_nav.models.state_space import StateSpaceModel
+from gpf_nav.sensors.sensor import Sensor
 
 
 STATE_LIMIT = 1e150

@@ -32,7 +32,7 @@ from functools import lru_cache
 import numpy as np
 from scipy.linalg import expm
 
-from gpf_nav.models.base import StateSpaceModel
+from gpf_nav.models.state_space import StateSpaceModel
 
 FRAME_STEP = 1e-6
 """Relative step of the central differences of a local frame

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import expm
 
-from gpf_nav.models.base import StateSpaceModel
+from gpf_nav.models.state_space import StateSpaceModel
 
 
 class LinearGaussianModel(StateSpaceModel):

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from gpf_nav.models.base import StateSpaceModel
+from gpf_nav.models.state_space import StateSpaceModel
 
 MU_MOON = 4.9028e12
 """Lunar gravitational parameter, m^3/s^2 (the paper's 4902.8 km^3/s^2)."""

@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from gpf_nav.estimator.validation import REASONS
+from gpf_nav.estimator.input_checks import REASONS
 
 OK, WARN, ERROR = 0, 1, 2
 STATUS_NAME = "gpf_estimator: filter"

@@ -1,6 +1,6 @@
 """``ros2 run gpf_nav estimator``: the GPF (or a baseline filter) as a managed ROS 2 navigation node.
 
-A thin adapter around :class:`gpf_nav.ros.estimator_core.EstimatorCore` (message checks, the
+A thin adapter around :class:`gpf_nav.ros.message_layer.MessageLayer` (message checks, the
 engine, output messages; shared with ``gpf-nav replay``): subscriptions, publishers, timers on the
 node clock, the ``~/reset`` service, the live parameters, the lifecycle and TF.
 
@@ -48,7 +48,7 @@ from gpf_nav.estimator.factory import FILTERS
 from gpf_nav.estimator.params import ESTIMATOR, ParameterError
 from gpf_nav.ros import conversions as conv
 from gpf_nav.ros import shutdown
-from gpf_nav.ros.estimator_core import INPUT_TOPICS, OUTPUT_TOPICS, EstimatorCore
+from gpf_nav.ros.message_layer import INPUT_TOPICS, OUTPUT_TOPICS, MessageLayer
 from gpf_nav.ros.parameters import declare, params_files, warn_undeclared, warn_unmatched_params_files
 
 try:
@@ -80,7 +80,7 @@ class EstimatorNode(LifecycleNode):
         self.params = declare(self, ESTIMATOR)
         warn_undeclared(self)
         warn_unmatched_params_files(self, params_files)
-        self.core: EstimatorCore | None = None
+        self.core: MessageLayer | None = None
         self.engine = None
         self.active = False
         self.finalized = False                  # after the shutdown transition: main() then exits 0
@@ -160,7 +160,7 @@ class EstimatorNode(LifecycleNode):
     def _configure(self) -> None:
         """Build the core and every topic, timer and service; raises ParameterError."""
         p = self.params
-        self.core = EstimatorCore(p, self._publish, self.get_logger(), wants_particles=self._wants_particles)
+        self.core = MessageLayer(p, self._publish, self.get_logger(), wants_particles=self._wants_particles)
         self.engine = self.core.engine
         self.ignored.clear()
         sensor_qos = QoSProfile(reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST,

@@ -2,10 +2,10 @@
 
 Generates the truth with the core scenario generator (or replays a CSV truth, parameter
 ``truth_csv``) and publishes, in simulated time, ``measurements/rae``, ``imu``, ``truth/odometry`` and
-``/clock``; with ``publish_suite`` also the sensor suite of :mod:`gpf_nav.sensor_suite` (``suite.*``):
+``/clock``; with ``publish_suite`` also the sensor suite of :mod:`gpf_nav.sim.sensor_suite` (``suite.*``):
 ``measurements/altitude``, ``measurements/velocity`` and ``measurements/position`` (TRN fixes published
 ``suite.trn_latency`` s after their stamp, the image capture). A wall-clock loop at ``clock_rate`` Hz advances simulated time by ``rate_factor`` times
-the elapsed wall time, publishes ``/clock`` and releases every event of :mod:`gpf_nav.playback`
+the elapsed wall time, publishes ``/clock`` and releases every event of :mod:`gpf_nav.sim.playback`
 due by then, with the event's own stamp; so message contents never depend on timing: same seed, same
 messages. By default simulated time starts at the wall-clock time (``start_time`` negative), so at
 ``rate_factor`` 1 an estimator on the wall clock accepts the stamps, and the mission's prior is handed
@@ -33,14 +33,14 @@ from gpf_nav.ros import conversions as conv
 from gpf_nav.ros import shutdown
 from gpf_nav.estimator.params import ParameterError, simulator_specs
 from gpf_nav.ros.parameters import declare, params_files, warn_undeclared, warn_unmatched_params_files
-from gpf_nav.playback import NS, build_events
+from gpf_nav.sim.playback import NS, build_events
 
 NODE_NAME = "lunar_simulator"
 
 
 def scenario_from_parameters(p: dict):
     """``(ScenarioConfig, Scenario)`` from the simulator's parameters (generated or CSV replay)."""
-    from gpf_nav.scenario import ScenarioConfig, generate, load_csv
+    from gpf_nav.sim.scenario import ScenarioConfig, generate, load_csv
     fields = {k[len("scenario."):]: v for k, v in p.items() if k.startswith("scenario.")}
     if not fields.get("thrust"):
         fields["thrust"] = None
@@ -54,7 +54,7 @@ EVENT_TOPICS = {"measurement": ("measurements/rae", Vector3Stamped), "truth": ("
                 "imu": ("imu", Imu), "altitude": ("measurements/altitude", Range),
                 "velocity": ("measurements/velocity", TwistWithCovarianceStamped),
                 "position": ("measurements/position", PoseWithCovarianceStamped)}
-"""Event kind of :mod:`gpf_nav.playback` -> (topic, message type); ``/clock`` besides."""
+"""Event kind of :mod:`gpf_nav.sim.playback` -> (topic, message type); ``/clock`` besides."""
 QOS_DEPTH = 1000
 """Depth of the simulator's reliable publishers (all topics, ``/clock`` too): a subscriber stalled for
 seconds at a high ``rate_factor`` (a busy machine) receives every message late rather than losing some."""
@@ -63,11 +63,11 @@ HANDOVER_TOPIC = "set_state"
 
 
 def suite_from_parameters(scenario, p: dict):
-    """The :class:`gpf_nav.sensor_suite.SuiteData` of ``scenario`` (seed ``p["seed"]``), or None unless
+    """The :class:`gpf_nav.sim.sensor_suite.SuiteData` of ``scenario`` (seed ``p["seed"]``), or None unless
     ``publish_suite``. ValueError for invalid ``suite.*`` values."""
     if not p["publish_suite"]:
         return None
-    from gpf_nav.sensor_suite import SuiteConfig, generate_suite
+    from gpf_nav.sim.sensor_suite import SuiteConfig, generate_suite
     config = SuiteConfig.from_dict({k[len("suite."):]: v for k, v in p.items() if k.startswith("suite.")})
     config.check_grid(scenario.config.dt)
     return generate_suite(scenario, config, p["seed"])

@@ -3,7 +3,7 @@
 Every filter updates with any of them, ``filter.update(y, sensor)``; ``filter.update(y)`` uses the
 model's own measurement, :class:`ModelSensor`.
 """
-from gpf_nav.sensors.base import (Bias, Padded, Sensor, gauss_markov_bias, innovation_distance,
+from gpf_nav.sensors.sensor import (Bias, Padded, Sensor, gauss_markov_bias, innovation_distance,
                                   random_constant_bias)
 from gpf_nav.sensors.bias import BiasedSensor, SensorBiasModel
 from gpf_nav.sensors.kinematic import AltitudeSensor, PositionSensor, StateComponentSensor, VelocitySensor

@@ -1,7 +1,7 @@
 """Sensor-bias states: a model with the biases of some sensors appended to its state.
 
 :class:`SensorBiasModel` runs any filter on ``x_aug = [x (n), b (n_b)]``: ``b`` holds one state per biased
-component of each sensor that declares a :class:`~gpf_nav.sensors.base.Bias` (random constant, or
+component of each sensor that declares a :class:`~gpf_nav.sensors.sensor.Bias` (random constant, or
 first-order Gauss-Markov), with the prior ``N(0, std^2)``, the transition ``b e^(-dt/tau)`` and the noise
 ``std^2 (1 - e^(-2 dt / tau))`` (zero for a constant). A biased sensor measures ``h(x) + b`` on the
 augmented state (:meth:`SensorBiasModel.lift`); the model's own measurement carries the bias of its
@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpf_nav.models.base import StateSpaceModel
-from gpf_nav.sensors.base import Padded, Sensor
+from gpf_nav.models.state_space import StateSpaceModel
+from gpf_nav.sensors.sensor import Padded, Sensor
 from gpf_nav.sensors.model import ModelSensor
 
 
@@ -66,7 +66,7 @@ class SensorBiasModel(StateSpaceModel):
 
     Args:
         base: the user's model (any :class:`StateSpaceModel`).
-        sensors: the sensors whose :attr:`~gpf_nav.sensors.base.Sensor.bias` is estimated (others are
+        sensors: the sensors whose :attr:`~gpf_nav.sensors.sensor.Sensor.bias` is estimated (others are
             ignored); names must be unique.
 
     Attributes:

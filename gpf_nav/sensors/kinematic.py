@@ -12,7 +12,7 @@ from functools import lru_cache
 import numpy as np
 
 from gpf_nav.models.lunar import MOON_RADIUS
-from gpf_nav.sensors.base import Bias, Sensor
+from gpf_nav.sensors.sensor import Bias, Sensor
 
 
 def noise_covariance(noise, dim: int) -> np.ndarray:

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpf_nav.models.base import StateSpaceModel
-from gpf_nav.sensors.base import Bias, Sensor
+from gpf_nav.models.state_space import StateSpaceModel
+from gpf_nav.sensors.sensor import Bias, Sensor
 
 
 class ModelSensor(Sensor):

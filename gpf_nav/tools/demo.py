@@ -17,7 +17,7 @@ import numpy as np
 
 from gpf_nav.arguments import CommandParser, positive_float, positive_int
 from gpf_nav.estimator.factory import FILTERS, make_filter
-from gpf_nav.scenario import ScenarioConfig, filter_model
+from gpf_nav.sim.scenario import ScenarioConfig, filter_model
 
 
 def _parser() -> CommandParser:

@@ -17,8 +17,8 @@ import numpy as np
 
 from gpf_nav.estimator.engine import EngineConfig, EstimatorEngine
 from gpf_nav.estimator.factory import make_filter
-from gpf_nav.scenario import ScenarioConfig, filter_model, generate
-from gpf_nav.sensor_suite import SuiteConfig, generate_suite, suite_sensors
+from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
+from gpf_nav.sim.sensor_suite import SuiteConfig, generate_suite, suite_sensors
 
 S = 1_000_000_000
 

@@ -123,7 +123,7 @@ def run(args) -> list[dict]:
     """Benchmark every particle count and rate of ``args``; one result row per pair."""
     import rclpy
 
-    from gpf_nav.scenario import ScenarioConfig, generate
+    from gpf_nav.sim.scenario import ScenarioConfig, generate
 
     rates = [float(r) for r in args.rates]
     particles = [int(n) for n in args.particles]

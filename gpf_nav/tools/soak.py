@@ -52,7 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gpf_nav.estimator.validation import REASONS
+from gpf_nav.estimator.input_checks import REASONS
 
 NS = 1_000_000_000
 RAW_TOPIC = "soak/raw/rae"

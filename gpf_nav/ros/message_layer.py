@@ -1,7 +1,7 @@
 """The estimator node's work between a received message and the messages it publishes, without a node.
 
-:class:`EstimatorCore` builds the model, filter and :class:`gpf_nav.estimator.engine.EstimatorEngine` from the
-node's parameters, applies the message-level checks of :mod:`gpf_nav.estimator.validation`, feeds the engine,
+:class:`MessageLayer` builds the model, filter and :class:`gpf_nav.estimator.engine.EstimatorEngine` from the
+node's parameters, applies the message-level checks of :mod:`gpf_nav.estimator.input_checks`, feeds the engine,
 and hands every output message to a ``publish(topic, msg)`` callable. The node clock comes in as
 ``now_ns`` with each call. Two drivers:
 
@@ -27,7 +27,7 @@ from std_msgs.msg import Float64
 
 from gpf_nav.ros import conversions as conv
 from gpf_nav.ros import diagnostics as diag
-from gpf_nav.estimator import validation as val
+from gpf_nav.estimator import input_checks as val
 from gpf_nav.estimator.engine import EngineConfig, EstimatorEngine
 from gpf_nav.estimator.factory import make_filter, make_lunar_model
 from gpf_nav.estimator.params import ParameterError
@@ -132,7 +132,7 @@ def filter_options(p: dict) -> dict:
                 ukf_alpha=p["ukf_alpha"], ukf_beta=p["ukf_beta"], ukf_kappa=p["ukf_kappa"])
 
 
-class EstimatorCore:
+class MessageLayer:
     """The estimator's message handling. Raises :class:`ParameterError` on invalid parameters.
 
     Args:

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gpf_nav.models.base import measurement_mean, wrapped_residual
+from gpf_nav.models.state_space import measurement_mean, wrapped_residual
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,6 @@
 """The descent's sensor suite beyond ground tracking: altimeter, terrain-relative navigation, velocimeter.
 
-:func:`generate_suite` draws, for a :class:`~gpf_nav.scenario.Scenario`, the data of three sensors on
+:func:`generate_suite` draws, for a :class:`~gpf_nav.sim.scenario.Scenario`, the data of three sensors on
 the scenario's time grid (SI units, world frame), each with its own rate, noise and availability:
 
 * an altimeter: altitude above the sphere of radius ``reference_radius``, available below
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gpf_nav.models.lunar import MOON_RADIUS
-from gpf_nav.scenario import Scenario
+from gpf_nav.sim.scenario import Scenario
 from gpf_nav.sensors import AltitudeSensor, PositionSensor, Sensor, VelocitySensor
 
 _SUITE_ENTROPY = 0x5E45_0118

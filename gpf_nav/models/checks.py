@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpf_nav.models.base import StateSpaceModel
+from gpf_nav.models.state_space import StateSpaceModel
 
 _DT = 1.0
 """Interval the transition methods are called with (one step of a discrete-time model)."""

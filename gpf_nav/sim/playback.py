@@ -1,6 +1,6 @@
 """The simulator's event schedule, without ROS: which message goes out at which simulated time.
 
-:func:`build_events` turns a :class:`gpf_nav.scenario.Scenario` into a time-ordered list of
+:func:`build_events` turns a :class:`gpf_nav.sim.scenario.Scenario` into a time-ordered list of
 :class:`Event` (times in integer nanoseconds from the trajectory start):
 
 * ``measurement`` at every ``scenario.times[k]`` whose vector is not entirely NaN (a dropout is a lost
@@ -9,7 +9,7 @@
   truth samples by cubic Hermite interpolation of positions and velocities;
 * ``imu`` every ``1 / imu_rate`` s: the specific force held over the scenario step that contains the
   time, plus white noise of ``imu_noise_std`` per axis from a stream seeded by ``seed``;
-* with a sensor suite (:func:`gpf_nav.sensor_suite.generate_suite`): ``altitude`` and ``velocity`` at
+* with a sensor suite (:func:`gpf_nav.sim.sensor_suite.generate_suite`): ``altitude`` and ``velocity`` at
   the times they measure, and ``position`` (a TRN fix) released at its arrival time, ``delay_ns`` after
   its capture, which is its stamp.
 
@@ -57,7 +57,7 @@ def hermite_state(t0: float, x0: np.ndarray, t1: float, x1: np.ndarray, t: float
 def build_events(scenario, imu_rate: float, imu_noise_std: float, truth_rate: float,
                  seed: int, suite=None) -> list[Event]:
     """The time-ordered events of ``scenario`` and of ``suite`` (a
-    :class:`gpf_nav.sensor_suite.SuiteData` of it, or None) (see the module docstring)."""
+    :class:`gpf_nav.sim.sensor_suite.SuiteData` of it, or None) (see the module docstring)."""
     t_truth = np.concatenate([[scenario.start_time], scenario.times]) - scenario.start_time
     t_truth_ns = np.round(t_truth * NS).astype(np.int64)
     span_ns = int(t_truth_ns[-1])

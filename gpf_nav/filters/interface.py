@@ -2,7 +2,7 @@
 
 Measurements are vectors ``y`` of shape ``(m,)``; a non-finite component (NaN) means "not measured" and
 the update uses only the measured rows. That is how partial observability reaches a filter.
-``update(y, sensor)`` conditions on the measurement of any :class:`~gpf_nav.sensors.base.Sensor` of the
+``update(y, sensor)`` conditions on the measurement of any :class:`~gpf_nav.sensors.sensor.Sensor` of the
 user's state; without one, on the model's own (:class:`~gpf_nav.sensors.model.ModelSensor`).
 
 Time: :attr:`Filter.time` is the elapsed time since ``initialize(mean, cov, t0)`` (``t0 + `` the sum of
@@ -16,9 +16,9 @@ from abc import ABC, abstractmethod
 import numpy as np
 
 from gpf_nav.integrity.observability import ObservabilityReport, ObservabilityTracker
-from gpf_nav.models.base import StateSpaceModel
-from gpf_nav.models.validation import validate_model
-from gpf_nav.sensors.base import Padded, Sensor
+from gpf_nav.models.state_space import StateSpaceModel
+from gpf_nav.models.checks import validate_model
+from gpf_nav.sensors.sensor import Padded, Sensor
 from gpf_nav.sensors.model import ModelSensor
 
 
@@ -30,7 +30,7 @@ an ensemble (a sum of N such products), it would overflow."""
 class Filter(ABC):
     """Base class of all filters: holds the model, the filter time and a seeded random generator.
 
-    The model is checked (:func:`~gpf_nav.models.validation.validate_model`) at the first ``initialize``.
+    The model is checked (:func:`~gpf_nav.models.checks.validate_model`) at the first ``initialize``.
 
     Args:
         model: the state-space model the filter runs on.

@@ -1,6 +1,6 @@
 """Co-state integrity monitor on the lunar descent: false alarms, detection of mismatch and of sudden faults.
 
-    python -m gpf_nav.experiments.integrity [--runs 24] [--particles 200] [--out results/integrity]
+    python -m gpf_nav.experiments.integrity_campaign [--runs 24] [--particles 200] [--out results/integrity]
 
 For each Monte Carlo run ``r`` and each filter variant (default GPF; GPF with the process-noise metric,
 ``eps = 1`` and corrected weights; bootstrap PF with the diagnostic co-state) the filter's weighted mean
@@ -36,9 +36,9 @@ import numpy as np
 
 from gpf_nav.arguments import CommandParser, positive_int
 from gpf_nav.integrity import CostateMonitor
-from gpf_nav.models.base import wrap_angle
+from gpf_nav.models.state_space import wrap_angle
 from gpf_nav.models.lunar import MOON_RADIUS, LunarDescentModel
-from gpf_nav.scenario import Scenario, ScenarioConfig, filter_model, generate
+from gpf_nav.sim.scenario import Scenario, ScenarioConfig, filter_model, generate
 
 VARIANTS = ("GPF", "GPF-paper", "GPF-Q", "SPF", "SPF-2k")
 VARIANT_LABELS = {
@@ -741,7 +741,7 @@ def main(argv: list[str] | None = None) -> int:
         path = args.out / "integrity_synthetic.json"
         path.write_text(json.dumps(_jsonable({"settings": settings.__dict__, "steps": args.synthetic,
                                               "series": result, "command": "python -m "
-                                              "gpf_nav.experiments.integrity " + " ".join(argv)}), indent=1))
+                                              "gpf_nav.experiments.integrity_campaign " + " ".join(argv)}), indent=1))
         print(f"\nwall time {time.perf_counter() - start:.0f} s; wrote {path}")
         return 0
     runs = []
@@ -763,7 +763,7 @@ def main(argv: list[str] | None = None) -> int:
                     s["series"] = {"statistic": series["statistic"], "threshold": series["threshold"]}
     report = {"settings": settings.__dict__, "variant_labels": VARIANT_LABELS, "summary": summary,
               "runs": runs, "wall_seconds": wall,
-              "command": "python -m gpf_nav.experiments.integrity " + " ".join(argv)}
+              "command": "python -m gpf_nav.experiments.integrity_campaign " + " ".join(argv)}
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "integrity.json"
     path.write_text(json.dumps(_jsonable(report)))

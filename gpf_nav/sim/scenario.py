@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gpf_nav.models.base import wrap_angle
+from gpf_nav.models.state_space import wrap_angle
 from gpf_nav.models.lunar import MOON_RADIUS, MU_MOON, LunarDescentModel
 
 CASES = ("full", "partial", "range")
