@@ -11,6 +11,7 @@
     gpf-nav demo         simulator + estimator over ROS 2, with a summary (``gpf_nav.tools.demo``)
     gpf-nav record       the simulator's scenario written as a rosbag2 bag (``gpf_nav.bags.record``)
     gpf-nav replay       the estimator run offline over a rosbag2 bag, with a summary (``gpf_nav.bags.replay``)
+    gpf-nav parameters   docs/parameters.md and config/*.yaml from the parameter schemas (``gpf_nav.tools.parameter_docs``)
 
 Sub-command modules are imported lazily, so e.g. ``bench`` needs neither ROS nor matplotlib. Every
 sub-command runs with the heap tuning of :mod:`gpf_nav.allocator` and BLAS bounded to one thread
@@ -37,6 +38,7 @@ COMMANDS = {
     "sensors": "gpf_nav.experiments.sensor_campaign",
     "record": "gpf_nav.bags.record",
     "replay": "gpf_nav.bags.replay",
+    "parameters": "gpf_nav.tools.parameter_docs",
 }
 def main(argv: list[str] | None = None) -> int:
     """Dispatch ``gpf-nav <command> [args]`` to ``<module>.main(args)``; returns the exit code."""

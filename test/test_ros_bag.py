@@ -31,7 +31,8 @@ from nav_msgs.msg import Odometry  # noqa: E402
 
 from gpf_nav.ros import conversions as conv  # noqa: E402
 from gpf_nav.bags.bag import BagReader, deserialize  # noqa: E402
-from gpf_nav.estimator.params import ESTIMATOR, ParameterError, parameters_from_files, simulator_specs  # noqa: E402
+from gpf_nav.estimator.params import ESTIMATOR, ParameterError, parameters_from_files  # noqa: E402
+from gpf_nav.sim.simulator_params import simulator_specs  # noqa: E402
 from gpf_nav.sim.playback import build_events  # noqa: E402
 from gpf_nav.bags.record import record  # noqa: E402
 from gpf_nav.bags.replay import REPLAY_PARAMETERS, replay  # noqa: E402

@@ -229,7 +229,8 @@ def _process(ros, module: str, log: Path, *ros_args: str) -> subprocess.Popen:
 
 def test_simulator_and_estimator_processes_exchange_every_sensor(ros, tmp_path):
     """The two console-script nodes as separate processes: every sensor the simulator sends is fused."""
-    from gpf_nav.estimator.params import parameters_from_files, simulator_specs
+    from gpf_nav.estimator.params import parameters_from_files
+    from gpf_nav.sim.simulator_params import simulator_specs
     from gpf_nav.ros.simulator_node import events_from_parameters, scenario_from_parameters
     sim_args = ["-p", "rate_factor:=20.0", "-p", "scenario.duration:=160.0", "-p", "start_time:=1000.0",
                 # a busy machine may take seconds to match the new process's publishers with the

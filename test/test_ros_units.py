@@ -163,8 +163,9 @@ def _flatten(d, prefix=""):
                                                 ("simulator.yaml", "lunar_simulator", "simulator")])
 def test_config_files_match_code_defaults(file, node, specs):
     yaml = pytest.importorskip("yaml")
-    from gpf_nav.estimator import params
-    table = params.ESTIMATOR if specs == "ESTIMATOR" else params.simulator_specs()
+    from gpf_nav.estimator.params import ESTIMATOR
+    from gpf_nav.sim.simulator_params import simulator_specs
+    table = ESTIMATOR if specs == "ESTIMATOR" else simulator_specs()
     data = yaml.safe_load((ROOT / "config" / file).read_text())
     values = _flatten(data["/**/" + node]["ros__parameters"])  # the shipped files match any namespace
     expected = {s.name: s.default for s in table if s.default is not None}

@@ -29,7 +29,8 @@ import time
 
 from gpf_nav.arguments import CommandParser, positive_float
 from gpf_nav.bags.bag import STORAGES, BagError, BagWriter, absolute, qos_profile
-from gpf_nav.estimator.params import ParameterError, parameters_from_files, simulator_specs
+from gpf_nav.estimator.params import ParameterError, parameters_from_files
+from gpf_nav.sim.simulator_params import check_simulator_parameters, simulator_specs
 
 CLOCK_TOPIC = "/clock"
 NOTHING_WRITTEN = 1  # exit status of a recording without a measurement
@@ -67,7 +68,7 @@ def record(out: str, p: dict, storage: str = "mcap") -> dict:
 
     from gpf_nav.ros import conversions as conv
     from gpf_nav.sim.playback import NS
-    from gpf_nav.ros.simulator_node import (EVENT_TOPICS, HANDOVER_TOPIC, QOS_DEPTH, check_simulator_parameters,
+    from gpf_nav.ros.simulator_node import (EVENT_TOPICS, HANDOVER_TOPIC, QOS_DEPTH,
                                             event_message, events_from_parameters, handover_message,
                                             scenario_from_parameters)
     errors = check_simulator_parameters(p)

@@ -10,7 +10,6 @@ state on the range component of the model's own measurement (the ``rae`` sensor:
 """
 from __future__ import annotations
 
-import math
 from typing import Callable
 
 from gpf_nav.filters import SensorBiasFilter
@@ -59,24 +58,3 @@ def with_biases(build: Callable[[object], object], model, sensors: dict[str, Sen
 def gates(p: dict) -> dict[str, float]:
     """Innovation-gate probability per sensor stream (0: off)."""
     return {stream: p[f"{stream}_gate"] for stream in SENSOR_STREAMS}
-
-
-def check_sensor_parameters(p: dict) -> list[str]:
-    """Errors in the sensor, history, gate and bias parameters."""
-    errors = []
-    for key in ("history_length", "reference_radius"):
-        if not (math.isfinite(p[key]) and p[key] >= 0):
-            errors.append(f"parameter '{key}' = {p[key]!r} must be >= 0")
-    if not (math.isfinite(p["altitude_noise_std"]) and p["altitude_noise_std"] > 0):
-        errors.append(f"parameter 'altitude_noise_std' = {p['altitude_noise_std']!r} must be positive")
-    for stream in SENSOR_STREAMS:
-        key = f"{stream}_gate"
-        if not (math.isfinite(p[key]) and 0.0 <= p[key] < 1.0):
-            errors.append(f"parameter '{key}' = {p[key]!r} must lie in [0, 1) (0: no gate)")
-    if p["gate_limit"] < 0:
-        errors.append(f"parameter 'gate_limit' = {p['gate_limit']} must be >= 0")
-    for name in BIASES:
-        for key in (f"{name}_bias_std", f"{name}_bias_time"):
-            if not (math.isfinite(p[key]) and p[key] >= 0):
-                errors.append(f"parameter '{key}' = {p[key]!r} must be >= 0")
-    return errors

@@ -20,12 +20,13 @@ is one that matches the node and that the params file does not use (:func:`overr
 """
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass
 
-from gpf_nav.estimator.factory import FILTERS
+from gpf_nav.estimator import params
 from gpf_nav.estimator.params import ParameterError, read_params_file, section_matches
+from gpf_nav.schema import Spec, within
+from gpf_nav.sim.simulator_params import simulator_specs
 
 NOT_GIVEN = ""
 BOOLEANS = ("true", "false")
@@ -33,6 +34,15 @@ LOG_LEVELS = ("debug", "info", "warn", "error", "fatal")
 """rcutils' severities, as ``--ros-args --log-level`` takes them (test_launch_arguments asks rcl)."""
 ESTIMATOR_NAME = "gpf_estimator"
 SIMULATOR_NAME = "lunar_simulator"
+
+
+def choices(spec: Spec) -> tuple[str, ...]:
+    """A parameter's values as launch arguments spell them: its choices, or true and false."""
+    return BOOLEANS if isinstance(spec.default, bool) else spec.choices
+
+
+ESTIMATOR = params.BY_NAME
+SIMULATOR = {spec.name: spec for spec in simulator_specs()}
 
 
 @dataclass(frozen=True)
@@ -53,11 +63,12 @@ ARGUMENTS = [
     Argument("log_level", "info", "Log level of both nodes.", LOG_LEVELS),
     Argument("autostart", NOT_GIVEN, "true: the estimator configures and activates itself; false: it waits, "
              "unconfigured, for a lifecycle manager; not given: the params file's value, else true.",
-             ("",) + BOOLEANS),
-    Argument("filter", NOT_GIVEN, "Estimator filter; not given: the params file's value, else gpf.", ("",) + FILTERS),
+             ("",) + choices(ESTIMATOR["autostart"])),
+    Argument("filter", NOT_GIVEN, "Estimator filter; not given: the params file's value, else gpf.",
+             ("",) + choices(ESTIMATOR["filter"])),
     Argument("rate_factor", "1.0", "Simulated seconds per wall second (a positive number)."),
     Argument("publish_suite", "false", "true: the simulator also publishes measurements/altitude, "
-             "measurements/position (TRN, 4 s late) and measurements/velocity.", BOOLEANS),
+             "measurements/position (TRN, 4 s late) and measurements/velocity.", choices(SIMULATOR["publish_suite"])),
     Argument("shutdown_on_simulator_exit", "false", "true: end the launch (and the estimator) when the simulator "
              "exits at the end of its trajectory; false: the estimator stays up.", BOOLEANS),
 ]
@@ -81,7 +92,7 @@ def check(values: dict[str, str]) -> list[str]:
             errors.append(f"launch argument {name}:={value!r} is not one of {', '.join(map(repr, argument.choices))}")
     rate = values.get("rate_factor", BY_NAME["rate_factor"].default)
     try:
-        ok = 0.0 < float(rate) < math.inf
+        ok = within(SIMULATOR["rate_factor"].bounds, float(rate))
     except ValueError:
         ok = False
     if not ok:

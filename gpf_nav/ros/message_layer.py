@@ -30,8 +30,8 @@ from gpf_nav.ros import diagnostics as diag
 from gpf_nav.estimator import input_checks as val
 from gpf_nav.estimator.engine import EngineConfig, EstimatorEngine
 from gpf_nav.estimator.factory import make_filter, make_lunar_model
-from gpf_nav.estimator.params import ParameterError
-from gpf_nav.estimator.sensor_setup import build_sensors, check_sensor_parameters, gates, with_biases
+from gpf_nav.estimator.params import ParameterError, check_estimator_parameters, filter_options
+from gpf_nav.estimator.sensor_setup import build_sensors, gates, with_biases
 
 LOG_THROTTLE = 5.0  # s (wall clock) between two log lines about the same refusal reason
 
@@ -47,67 +47,6 @@ OUTPUT_TOPICS = {"odometry/filtered": Odometry, "gpf/ess": Float64, "gpf/costate
                  "/diagnostics": DiagnosticArray}
 
 
-def check_estimator_parameters(p: dict) -> list[str]:
-    """Errors in the non-filter parameters (the filter's are checked by ``make_filter``)."""
-    errors = []
-    positive = ("max_future", "imu_timeout", "max_extrapolation", "diagnostics_period",
-                "sensor_timeout", "quaternion_tolerance")
-    for key in positive:
-        if not (math.isfinite(p[key]) and p[key] > 0):
-            errors.append(f"parameter '{key}' = {p[key]!r} must be positive")
-    for key in ("publish_rate", "max_measurement_rate", "reinit_hold"):
-        if not (math.isfinite(p[key]) and p[key] >= 0):
-            errors.append(f"parameter '{key}' = {p[key]!r} must be >= 0")
-    if p["init_window"] < 2:
-        errors.append(f"parameter 'init_window' = {p['init_window']} must be >= 2")
-    if p["queue_depth"] < 1:
-        errors.append(f"parameter 'queue_depth' = {p['queue_depth']} must be >= 1")
-    if p["max_published_particles"] < 0:
-        errors.append(f"parameter 'max_published_particles' = {p['max_published_particles']} must be >= 0")
-    if not (math.isfinite(p["ess_warn_threshold"]) and 0 <= p["ess_warn_threshold"] <= 1):
-        errors.append(f"parameter 'ess_warn_threshold' = {p['ess_warn_threshold']!r} must lie in [0, 1]")
-    if not p["costate_warn_threshold"] > 0:
-        errors.append(f"parameter 'costate_warn_threshold' = {p['costate_warn_threshold']!r} must be positive")
-    if p["initial_state"] is not None and (len(p["initial_state"]) != 6
-                                           or not all(math.isfinite(v) for v in p["initial_state"])):
-        errors.append(f"parameter 'initial_state' = {p['initial_state']!r} must be 6 finite numbers "
-                      "[x, y, z, vx, vy, vz] (m, m/s)")
-    if len(p["initial_std"]) != 6 or not all(math.isfinite(v) and v > 0 for v in p["initial_std"]):
-        errors.append(f"parameter 'initial_std' = {p['initial_std']!r} must be 6 positive numbers")
-    if not math.isfinite(p["initial_stamp"]):
-        errors.append(f"parameter 'initial_stamp' = {p['initial_stamp']!r} must be finite")
-    if not p["world_frame"]:
-        errors.append("parameter 'world_frame' must not be empty")
-    errors.extend(check_monitor_parameters(p))
-    errors.extend(check_sensor_parameters(p))
-    return errors
-
-
-def check_monitor_parameters(p: dict) -> list[str]:
-    """Errors in the ``monitor_*`` parameters (checked even when the monitor is disabled)."""
-    errors = []
-    if p["monitor_window"] < 1:
-        errors.append(f"parameter 'monitor_window' = {p['monitor_window']} must be >= 1")
-    if p["monitor_gap"] < 0:
-        errors.append(f"parameter 'monitor_gap' = {p['monitor_gap']} must be >= 0")
-    if not 2 <= p["monitor_min_reference"] <= p["monitor_reference"]:
-        errors.append(f"parameters 'monitor_min_reference' = {p['monitor_min_reference']} and 'monitor_reference' "
-                      f"= {p['monitor_reference']} must satisfy 2 <= monitor_min_reference <= monitor_reference")
-    alpha, warn = p["monitor_false_alarm_rate"], p["monitor_warn_false_alarm_rate"]
-    if not (math.isfinite(alpha) and 0.0 < alpha < 1.0):
-        errors.append(f"parameter 'monitor_false_alarm_rate' = {alpha!r} must lie in (0, 1)")
-    elif not (math.isfinite(warn) and alpha <= warn < 1.0):
-        errors.append(f"parameter 'monitor_warn_false_alarm_rate' = {warn!r} must lie in "
-                      f"[monitor_false_alarm_rate, 1) = [{alpha!r}, 1)")
-    quarantine = p["monitor_quarantine_rate"]
-    if not math.isfinite(quarantine) or (quarantine >= 0.0 and math.isfinite(alpha) and quarantine > alpha):
-        errors.append(f"parameter 'monitor_quarantine_rate' = {quarantine!r} must be negative (default) or "
-                      "lie in [0, monitor_false_alarm_rate]")
-    if not math.isfinite(p["monitor_hold"]):
-        errors.append(f"parameter 'monitor_hold' = {p['monitor_hold']!r} must be finite (negative: latched)")
-    return errors
-
-
 def monitor_options(p: dict) -> dict | None:
     """``CostateMonitor`` keyword arguments from the node parameters (None when disabled)."""
     if not p["monitor_enabled"]:
@@ -117,19 +56,6 @@ def monitor_options(p: dict) -> dict | None:
                 false_alarm_rate=p["monitor_false_alarm_rate"],
                 warn_false_alarm_rate=p["monitor_warn_false_alarm_rate"],
                 quarantine_rate=None if p["monitor_quarantine_rate"] < 0 else p["monitor_quarantine_rate"])
-
-
-def filter_options(p: dict) -> dict:
-    """``make_filter`` keyword arguments from the node parameters."""
-    return dict(n_particles=p["n_particles"], seed=p["seed"], reference=p["reference"],
-                weighting=p["weighting"], metric=p["metric"], regularization=p["regularization"],
-                unmodelled_acceleration_std=p["unmodelled_acceleration_std"],
-                unmodelled_acceleration_time=p["unmodelled_acceleration_time"],
-                nominal_prior=p["nominal_prior"], kernel_bandwidth=p["kernel_bandwidth"],
-                model_switch_time=p["model_switch_time"],
-                collapse_steps=p["collapse_steps"], resampling=p["resampling"],
-                ess_threshold=p["ess_threshold"], compute_costate=p["compute_costate"],
-                ukf_alpha=p["ukf_alpha"], ukf_beta=p["ukf_beta"], ukf_kappa=p["ukf_kappa"])
 
 
 class MessageLayer:
@@ -148,25 +74,20 @@ class MessageLayer:
                  wants_particles: Callable[[], bool] = lambda: False):
         p = self.params = params
         errors = check_estimator_parameters(p)
+        if errors:
+            raise ParameterError("invalid parameters: " + "; ".join(errors))
         try:
             self.model = make_lunar_model(mu=p["mu"], station=p["station"],
                                           range_noise_std=p["range_noise_std"],
                                           angle_noise_std=p["angle_noise_std"],
                                           accel_noise_density=p["accel_noise_density"],
                                           max_step=p["max_step"])
+            self.sensors = build_sensors(p, self.model)
+            factory = with_biases(lambda m: make_filter(p["filter"], m, **filter_options(p)), self.model,
+                                  self.sensors)
+            factory()
         except ValueError as err:
-            errors.append(str(err))
-            self.model = None
-        if self.model is not None:
-            try:
-                self.sensors = build_sensors(p, self.model)
-                factory = with_biases(lambda m: make_filter(p["filter"], m, **filter_options(p)), self.model,
-                                      self.sensors)
-                factory()
-            except ValueError as err:
-                errors.append(str(err))
-        if errors:
-            raise ParameterError("invalid parameters: " + "; ".join(errors))
+            raise ParameterError(f"invalid parameters: {err}") from None
         self.filter_name = p["filter"]
         config = EngineConfig(
             max_future=p["max_future"], imu_timeout=p["imu_timeout"], init_window=p["init_window"],

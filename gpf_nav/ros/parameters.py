@@ -1,16 +1,17 @@
-"""Declare a parameter table of :mod:`gpf_nav.estimator.params` on an rclpy node, warn about the
+"""Declare a parameter table (:mod:`gpf_nav.schema`) on an rclpy node, warn about the
 parameters a node was given but does not declare and about params files none of whose sections applies
 to the node, and check the params files of a command line before ``rclpy.init`` reads them.
 
 Numbers are declared with dynamic typing, so ``1`` in a YAML file is accepted for a float; every value is
-returned coerced to its default's type (:func:`gpf_nav.estimator.params.coerce`).
+returned coerced to its default's type (:func:`gpf_nav.schema.coerce`).
 """
 from __future__ import annotations
 
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.exceptions import ParameterUninitializedException
 
-from gpf_nav.estimator.params import ParameterError, Spec, coerce, read_params_file, unmatched_sections
+from gpf_nav.estimator.params import read_params_file, unmatched_sections
+from gpf_nav.schema import ParameterError, Spec, coerce
 
 
 def declare(node, specs: list[Spec]) -> dict:
@@ -18,7 +19,7 @@ def declare(node, specs: list[Spec]) -> dict:
     values = {}
     for spec in specs:
         numeric = isinstance(spec.default, (int, float)) and not isinstance(spec.default, bool)
-        descriptor = ParameterDescriptor(description=spec.description, read_only=not spec.live,
+        descriptor = ParameterDescriptor(description=spec.help, read_only=not spec.live,
                                          dynamic_typing=numeric or spec.default is None)
         if spec.default is None:  # no default, any numeric list: declared NOT_SET with dynamic typing
             node.declare_parameter(spec.name, None, descriptor)

@@ -13,7 +13,6 @@ over on ``set_state`` (latched) when the trajectory starts. See ``docs/ros.md``.
 """
 from __future__ import annotations
 
-import math
 import sys
 import time
 
@@ -31,9 +30,10 @@ from sensor_msgs.msg import Imu, Range
 
 from gpf_nav.ros import conversions as conv
 from gpf_nav.ros import shutdown
-from gpf_nav.estimator.params import ParameterError, simulator_specs
+from gpf_nav.schema import ParameterError
 from gpf_nav.ros.parameters import declare, params_files, warn_undeclared, warn_unmatched_params_files
 from gpf_nav.sim.playback import NS, build_events
+from gpf_nav.sim.simulator_params import check_simulator_parameters, simulator_specs
 
 NODE_NAME = "lunar_simulator"
 
@@ -129,22 +129,6 @@ def event_message(event, stamp_ns: int, p: dict) -> tuple[str, object]:
 def handover_message(scenario, stamp_ns: int, p: dict) -> Odometry:
     """The scenario's prior (mean, covariance) as handed over on ``set_state`` at ``stamp_ns``."""
     return conv.odometry_msg(scenario.prior_mean, scenario.prior_cov, stamp_ns, p["world_frame"], p["base_frame"])
-
-
-def check_simulator_parameters(p: dict) -> list[str]:
-    errors = []
-    for key in ("imu_rate", "truth_rate", "imu_noise_std", "start_delay"):
-        if not (math.isfinite(p[key]) and p[key] >= 0):
-            errors.append(f"parameter '{key}' = {p[key]!r} must be >= 0")
-    if not math.isfinite(p["start_time"]):
-        errors.append(f"parameter 'start_time' = {p['start_time']!r} must be finite (negative: the wall-clock time)")
-    for key in ("clock_rate", "rate_factor"):
-        if not (math.isfinite(p[key]) and p[key] > 0):
-            errors.append(f"parameter '{key}' = {p[key]!r} must be positive")
-    if not p["publish_clock"] and p["rate_factor"] != 1.0:
-        errors.append("parameter 'rate_factor' != 1 needs publish_clock: true (stamps would run ahead "
-                      "of the wall clock)")
-    return errors
 
 
 class SimulatorNode(Node):
