@@ -13,17 +13,17 @@ def test_bench_reports_every_filter_and_the_ratio_of_the_same_run(capsys):
     assert cli.main(["bench", "--json", "--particles", "200", "--repeats", "1"]) == 0
     report = json.loads(capsys.readouterr().out)
     names = [(r["filter"], r["particles"]) for r in report["results"]]
-    assert names == [("GPF", 200), ("GPF-paper", 200), ("GPF-single", 200), ("SPF", 200), ("EKF", None), ("UKF", None),
-                     ("EnKF", 500)]
+    assert names == [("gpf", 200), ("gpf-paper", 200), ("gpf-single", 200), ("spf", 200), ("ekf", None), ("ukf", None),
+                     ("enkf", 500)]
     times = {name: r["us_per_step"] for name, r in zip(names, report["results"])}
     blocks = {name: np.array(r["blocks_us"]) for name, r in zip(names, report["results"])}
     assert all(np.isfinite(t) and t > 0 for t in times.values())
     assert all(times[name] == pytest.approx(np.median(b)) and b.size == 1 for name, b in blocks.items())
     # the ratios are the medians over rounds of the ratio of the two filters' blocks of a round
     assert report["gpf_over_spf"]["200"] == pytest.approx(
-        np.median(blocks[("GPF", 200)] / blocks[("SPF", 200)]))
+        np.median(blocks[("gpf", 200)] / blocks[("spf", 200)]))
     assert report["gpf_over_paper_gpf"]["200"] == pytest.approx(
-        np.median(blocks[("GPF", 200)] / blocks[("GPF-paper", 200)]))
+        np.median(blocks[("gpf", 200)] / blocks[("gpf-paper", 200)]))
     expected = "retain_freed_memory" if allocator.retained else "default"
     assert report["machine"]["allocator"] == expected
     text = bench.format_table(report)

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from gpf_nav import cli
+from gpf_nav import cli, registry
 from gpf_nav.experiments import montecarlo, runner
 from gpf_nav.experiments.parallel import map_tasks
 from gpf_nav.sim.scenario import ScenarioConfig
@@ -41,7 +41,7 @@ def test_montecarlo_smoke_json_schema_and_finite_numbers(smoke):
                 assert set(row[metric]) >= {"mean", "std"}, (case, name, metric)
             for metric in ("position_rmse_km", "velocity_rmse_mps", "max_position_error_km"):
                 assert _finite(row[metric]) and row[metric]["n"] == 5, (case, name, metric)
-            if name in runner.PARTICLE_FILTERS:
+            if registry.lookup(name).particles:
                 for metric in ("ess", "costate_norm", "resample_rate"):
                     assert _finite(row[metric]), (case, name, metric)
                 assert 0.0 < row["ess"]["mean"] <= 1.0
@@ -50,14 +50,14 @@ def test_montecarlo_smoke_json_schema_and_finite_numbers(smoke):
             # NEES is finite unless the filter's covariance was never positive definite (then it is null)
             assert _finite(row["nees"]) or (row["nees"]["mean"] is None and row["nees_defined"]["mean"] == 0)
             assert data["failures"][name]["nonfinite"] == 0
-        assert set(data["wilcoxon"]) == set(runner.FILTERS) - {runner.GPF_NAV}
+        assert set(data["wilcoxon"]) == set(runner.FILTERS) - {registry.label("gpf")}
         assert set(data["oracle_multiplier"]) == set(runner.ORACLE_FAMILIES)
         assert all(m in runner.ORACLE_GRID for m in data["oracle_multiplier"].values())
         for p in data["wilcoxon"].values():
             assert p is None or 0.0 <= p <= 1.0
         band = data["nees_band"]
         assert band["lower"] < 6.0 < band["upper"] and band["runs"] == 5
-        assert set(data["correlations"]) == {n for n in runner.FILTERS if n in runner.PARTICLE_FILTERS}
+        assert set(data["correlations"]) == {n for n in runner.FILTERS if registry.lookup(n).particles}
     for case in report["per_run"]:
         assert all(len(v["position_rmse_km"]) == 5 for v in report["per_run"][case].values())
     assert report["meta"]["wall_seconds"] > 0
@@ -139,7 +139,7 @@ def test_sweep_smoke(tmp_path):
     report = json.loads((tmp_path / "sweep_mismatch.json").read_text())
     assert report["values"] == [0.0, 0.2] and report["field"] == "epsilon"
     for case in ("full", "partial"):
-        for name in (runner.GPF_NAV, "EKF"):
+        for name in (registry.label("gpf"), "EKF"):
             for key in ("position_rmse_km", "velocity_rmse_mps", "nees"):
                 rows = report["cases"][case]["filters"][name][key]
                 assert len(rows) == 2 and all(_finite(r) for r in rows)
@@ -162,11 +162,11 @@ def test_sweep_merge_reruns_only_the_named_rows(tmp_path, capsys):
                               "--merge", str(first / "sweep_mismatch.json")]) == 0
     merged = json.loads((second / "sweep_mismatch.json").read_text())
     rows = merged["cases"]["full"]["filters"]
-    assert list(rows) == ["EKF", "SPF", runner.EKF_COMPENSATED]
+    assert list(rows) == ["EKF", "SPF", registry.label("ekf-comp")]
     assert rows["SPF"] == earlier["cases"]["full"]["filters"]["SPF"]  # kept
     assert rows["EKF"] == earlier["cases"]["full"]["filters"]["EKF"]  # re-run: deterministic
-    assert rows[runner.EKF_COMPENSATED]["position_rmse_km"][0]["n"] == 2
-    assert merged["meta"]["rerun"] == ["EKF", runner.EKF_COMPENSATED]
+    assert rows[registry.label("ekf-comp")]["position_rmse_km"][0]["n"] == 2
+    assert merged["meta"]["rerun"] == ["EKF", registry.label("ekf-comp")]
     assert merged["meta"]["dropped"] == ["GPF of an older name"]
     assert "GPF of an older name" not in merged["settings"]["filters"]
     assert merged["meta"]["earlier"] == earlier["meta"]

@@ -9,7 +9,8 @@ import pytest
 
 from gpf_nav import cli
 from gpf_nav.experiments import sensor_campaign
-from gpf_nav.experiments.runner import ALIASES, _make_filter
+from gpf_nav.experiments.runner import make_filter
+from gpf_nav.registry import label
 from gpf_nav.models.lunar import MOON_RADIUS
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 from gpf_nav.sim.sensor_suite import SuiteConfig, generate_suite
@@ -55,7 +56,7 @@ def test_a_late_fix_gives_the_estimate_of_in_order_delivery(name):
     runs = {}
     for latency in (0.0, 4.0):
         suite = generate_suite(scenario, SuiteConfig(trn_latency=latency, altimeter_max_altitude=1e6), 1)
-        runs[latency] = sensor_campaign.fuse(_make_filter(ALIASES[name], model, 200, 3), scenario, suite)
+        runs[latency] = sensor_campaign.fuse(make_filter(label(name), model, 200, 3), scenario, suite)
     late, in_order = runs[4.0], runs[0.0]
     assert late["fixes"] == in_order["fixes"] == 9 and late["error"] is None
     assert late["position_error"][-1] == in_order["position_error"][-1]
@@ -70,15 +71,15 @@ def test_the_full_suite_halves_the_position_error():
     config = ScenarioConfig(duration=800.0)
     report, figure = sensor_campaign.campaign(config, SuiteConfig(altimeter_max_altitude=1e6,
                                                                   velocimeter_max_altitude=1e6),
-                                              runs=1, filters=(ALIASES["gpf"],), workers=1, progress=False)
-    entry = report["filters"][ALIASES["gpf"]]
+                                              runs=1, filters=(label("gpf"),), workers=1, progress=False)
+    entry = report["filters"][label("gpf")]
     assert entry["second_half_position_ratio"]["of_means"] < 0.5
     full = entry["full"]
     assert full["fixes"]["mean"] + full["refused"]["mean"] == 79  # the 80th arrives after the end
     assert full["refused"]["mean"] <= 8  # 5 % outliers of 79
     assert entry["full"]["failed_runs"] == entry["rae"]["failed_runs"] == 0
     assert "full suite" in sensor_campaign.markdown(report)
-    assert figure["series"][ALIASES["gpf"]]["full"]["position_error"].shape == (1, 400)
+    assert figure["series"][label("gpf")]["full"]["position_error"].shape == (1, 400)
 
 
 def test_the_sensors_command_writes_its_report(tmp_path):
@@ -99,7 +100,7 @@ def test_the_fix_gate_refuses_outliers_whole():
                                                  velocimeter_max_altitude=0.0), 2)
     outliers = int(suite.position_outlier.sum())
     model = filter_model(config)
-    runs = {gate: sensor_campaign.fuse(_make_filter(ALIASES["ekf-comp"], model, 1, 0), scenario, suite, gate)
+    runs = {gate: sensor_campaign.fuse(make_filter(label("ekf-comp"), model, 1, 0), scenario, suite, gate)
             for gate in (0.0, 0.999)}
     assert runs[0.0]["refused"] == 0 and outliers >= 8
     assert runs[0.999]["refused"] >= 0.7 * outliers

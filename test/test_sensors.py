@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from examples import own_sensor
-from gpf_nav.experiments.runner import ALIASES, _make_filter
+from gpf_nav.experiments.runner import make_filter
+from gpf_nav.registry import label, short_names
 from gpf_nav.filters import (BootstrapPF, EnsembleKF, ExtendedKF, GeometricProjectionPF, MultipleModelGPF,
                              SensorBiasFilter, UnscentedKF)
 from gpf_nav.models import LinearGaussianModel, LunarDescentModel
@@ -18,7 +19,7 @@ from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 from gpf_nav.sensors import (AltitudeSensor, ModelSensor, PositionSensor, VelocitySensor, gauss_markov_bias,
                              random_constant_bias)
 
-FILTER_NAMES = tuple(ALIASES)  # every filter of the experiments, by its short name
+FILTER_NAMES = short_names()  # every filter of the experiments, by its short name
 ORACLES = ("ekf-oracle", "ukf-oracle")
 
 
@@ -35,7 +36,7 @@ def test_every_filter_updates_with_every_sensor(name):
     model = filter_model(config)
     truth = scenario.truth[1]
     for sensor in _lunar_sensors(model):
-        flt = _make_filter(ALIASES[name], model, 400, 3)
+        flt = make_filter(label(name), model, 400, 3)
         flt.initialize(scenario.prior_mean, scenario.prior_cov)
         flt.predict(config.dt)
         y = sensor.measure(truth[None])[0]
@@ -124,7 +125,7 @@ def test_the_models_own_sensor_is_the_default_bit_for_bit(name):
     model = filter_model(config)
     runs = []
     for sensor in (None, ModelSensor(model, "rae")):
-        flt = _make_filter(ALIASES[name], model, 200, 4)
+        flt = make_filter(label(name), model, 200, 4)
         flt.initialize(scenario.prior_mean, scenario.prior_cov)
         trace = []
         for k in range(len(scenario.times)):
@@ -239,13 +240,13 @@ def test_a_constant_range_bias_of_two_sigma_estimated_on_the_descent():
     base = ScenarioConfig()
     biased = dataclasses.replace(base, measurement_bias_sigma=(2.0, 0.0, 0.0))
     model = filter_model(base)
-    name = ALIASES["gpf"]
+    name = label("gpf")
     rae = ModelSensor(model, "rae", bias=random_constant_bias([3.0 * base.range_noise_std, 0.0, 0.0]))
     for run in range(2):
         scenario_seed, filter_seed = run_seeds(0, run)
-        unbiased = run_filter(_make_filter(name, model, 500, filter_seed), generate(base, scenario_seed))
-        ignored = run_filter(_make_filter(name, model, 500, filter_seed), generate(biased, scenario_seed))
-        flt = SensorBiasFilter(lambda m: _make_filter(name, m, 500, filter_seed), model, [rae])
+        unbiased = run_filter(make_filter(name, model, 500, filter_seed), generate(base, scenario_seed))
+        ignored = run_filter(make_filter(name, model, 500, filter_seed), generate(biased, scenario_seed))
+        flt = SensorBiasFilter(lambda m: make_filter(name, m, 500, filter_seed), model, [rae])
         estimated = run_filter(flt, generate(biased, scenario_seed))
         assert ignored["nees"] > 50.0
         assert 2.0 <= estimated["nees"] <= 15.0, estimated["nees"]

@@ -5,13 +5,13 @@ import math
 import numpy as np
 import pytest
 
-from gpf_nav import cli
+from gpf_nav import cli, registry
 from gpf_nav.experiments import runner, stress
 from gpf_nav.filters import ExtendedKF
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 
 TINY = ["--runs", "2", "--duration", "40", "--particles", "40", "--no-progress"]  # 20 steps per run
-FILTERS = (runner.GPF_NAV, runner.GPF_SINGLE, runner.EKF_COMPENSATED_GATED, "EKF", "EKF, oracle-tuned Q")
+FILTERS = tuple(map(registry.label, ("gpf", "gpf-single", "ekf-comp-gated", "ekf", "ekf-oracle")))
 
 
 def test_stress_command_writes_every_condition_and_filter(tmp_path):
@@ -30,7 +30,7 @@ def test_stress_command_writes_every_condition_and_filter(tmp_path):
             assert row["position_rmse_median"] == pytest.approx(np.median(per_run))
             assert row["worst_run"]["position_rmse"] == pytest.approx(per_run.max())
             assert math.isfinite(row["velocity_rmse_mean"]) and row["covariance_failures"] >= 0
-            particle = name in runner.PARTICLE_FILTERS
+            particle = registry.lookup(name).particles
             assert (row["first_ess_mean"] is not None) == particle
             if particle:
                 assert 0.0 < row["first_ess_min"] <= row["first_ess_mean"] <= 1.0

@@ -36,7 +36,7 @@ class BeaconRange(Sensor):
 def run(filter_name: str = "gpf", steps: int = 60, seed: int = 1) -> tuple[float, float]:
     """Fly the paper's descent with the model's range/azimuth/elevation and a beacon range every step;
     return the final position error, m, with the beacon and without it."""
-    from gpf_nav.experiments.runner import ALIASES, _make_filter
+    from gpf_nav import registry
     from gpf_nav.sim.scenario import MOON_RADIUS, ScenarioConfig, filter_model, generate
 
     config = ScenarioConfig(duration=steps * 2.0, case="partial")
@@ -45,7 +45,7 @@ def run(filter_name: str = "gpf", steps: int = 60, seed: int = 1) -> tuple[float
     rng = np.random.default_rng(seed)
     errors = []
     for use_beacon in (True, False):
-        flt = _make_filter(ALIASES[filter_name], filter_model(config), 300, seed)
+        flt = registry.make(filter_name, filter_model(config), 300, seed)
         flt.initialize(scenario.prior_mean, scenario.prior_cov)
         for k in range(steps):
             flt.predict(config.dt, scenario.specific_force[k])

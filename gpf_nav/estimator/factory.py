@@ -9,16 +9,15 @@ import math
 
 import numpy as np
 
+from gpf_nav import registry
 from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME
 from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
-from gpf_nav.filters.gpf import OBSERVABILITY_CONSTRAINT
 from gpf_nav.filters.multiple_model import SWITCH_TIME
 from gpf_nav.models.lunar import LunarDescentModel
 
-FILTERS = ("gpf", "gpf-single", "gpf-mm", "spf", "ekf", "ukf", "enkf")
-"""``gpf`` is the multiple-model GPF (``gpf-mm`` is its former name, kept); ``gpf-single`` one compensated GPF."""
-PARTICLE_FILTERS = ("gpf", "gpf-single", "gpf-mm", "spf")
-GPF_FILTERS = ("gpf", "gpf-single", "gpf-mm")
+FILTERS = registry.node_names()
+"""The node's filters (:func:`gpf_nav.registry.node_names`): ``gpf`` is the multiple-model GPF (``gpf-mm``
+is its former name, kept); ``gpf-single`` one compensated GPF."""
 
 
 def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 0,
@@ -29,14 +28,16 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
                 nominal_prior: float = NOMINAL_PRIOR, kernel_bandwidth: float = 0.0, model_switch_time: float = SWITCH_TIME, collapse_steps: int = 0,
                 resampling: str = "systematic", ess_threshold: float = 0.5, compute_costate: bool = True,
                 ukf_alpha: float = 1e-3, ukf_beta: float = 2.0, ukf_kappa: float = 0.0):
-    """Build the filter called ``name`` (one of :data:`FILTERS`) on ``model``.
+    """Build the node's filter ``name`` (one of :data:`FILTERS`, an entry of :mod:`gpf_nav.registry`) on
+    ``model``.
 
     ``seed < 0`` (or None) draws a random seed; ``regularization`` and ``kernel_bandwidth`` 0 take the
     filter's defaults. Options a filter does not use are ignored (for example ``n_particles`` for the
-    EKF). With the defaults, ``make_filter("gpf", model)`` is ``MultipleModelGPF(model)`` (``gpf-mm`` the
-    same), or the nominal ``GeometricProjectionPF`` when ``unmodelled_acceleration_std`` is 0 (no second
-    model); ``make_filter("gpf-single", model)`` is ``GeometricProjectionPF(model)`` (``nominal_prior``
-    applies to it only). Raises ValueError naming the offending parameter.
+    EKF); the entry's ``node_options`` are added. With the defaults, ``make_filter("gpf", model)`` is
+    ``MultipleModelGPF(model)`` (``gpf-mm`` the same), or the nominal ``GeometricProjectionPF`` when
+    ``unmodelled_acceleration_std`` is 0 (no second model); ``make_filter("gpf-single", model)`` is
+    ``GeometricProjectionPF(model)`` (``nominal_prior`` applies to it only). Raises ValueError naming the
+    offending parameter.
     """
     errors = check_filter_options(name, n_particles=n_particles, reference=reference,
                                   weighting=weighting, regularization=regularization,
@@ -50,48 +51,18 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
     if errors:
         raise ValueError("; ".join(errors))
     seed = None if seed is None or int(seed) < 0 else int(seed)
-    if name in GPF_FILTERS:
-        from gpf_nav.filters import GeometricProjectionPF, MultipleModelGPF
-        options = dict(reference=reference, weighting=weighting, metric=metric,
-                       regularization=regularization or None,
-                       unmodelled_acceleration_std=unmodelled_acceleration_std,
-                       unmodelled_acceleration_time=unmodelled_acceleration_time,
-                       kernel_bandwidth=kernel_bandwidth or None, resampling=resampling,
-                       ess_threshold=ess_threshold, seed=seed, collapse_steps=int(collapse_steps))
-        if name == "gpf-single":
-            return GeometricProjectionPF(model, int(n_particles), nominal_prior=nominal_prior, **options)
-        if unmodelled_acceleration_std == 0.0:  # one model only: the nominal GPF
-            return GeometricProjectionPF(model, int(n_particles), **options)
-        return MultipleModelGPF(model, int(n_particles), switch_time=model_switch_time, **options)
-    if name == "spf":
-        from gpf_nav.filters import BootstrapPF
-        return BootstrapPF(model, int(n_particles), resampling=resampling, ess_threshold=ess_threshold,
-                           seed=seed, compute_costate=bool(compute_costate),
-                           regularization=regularization or 1e-6, collapse_steps=int(collapse_steps),
-                           observability_constraint=OBSERVABILITY_CONSTRAINT)
-    cls = _core_class({"ekf": "ExtendedKF", "ukf": "UnscentedKF", "enkf": "EnsembleKF"}[name])
-    if name == "ekf":
-        return cls(model, seed=seed)
-    if name == "ukf":
-        return cls(model, alpha=ukf_alpha, beta=ukf_beta, kappa=ukf_kappa, seed=seed)
-    return cls(model, int(n_particles), seed=seed)
-
-
-def _core_class(class_name: str):
-    import gpf_nav.filters as filters
-    cls = getattr(filters, class_name, None)
-    if cls is None:  # not (yet) exported by gpf_nav.filters: look in the modules that define them
-        import importlib
-        for module in ("gpf_nav.filters.kalman", "gpf_nav.filters.ensemble"):
-            try:
-                cls = getattr(importlib.import_module(module), class_name, None)
-            except ImportError:
-                cls = None
-            if cls is not None:
-                break
-    if cls is None:
-        raise ValueError(f"filter class {class_name} is not available in this gpf_nav build")
-    return cls
+    options = dict(reference=reference, weighting=weighting, metric=metric,
+                   unmodelled_acceleration_std=unmodelled_acceleration_std,
+                   unmodelled_acceleration_time=unmodelled_acceleration_time, nominal_prior=nominal_prior,
+                   switch_time=model_switch_time, resampling=resampling, ess_threshold=ess_threshold,
+                   collapse_steps=int(collapse_steps), compute_costate=bool(compute_costate),
+                   alpha=ukf_alpha, beta=ukf_beta, kappa=ukf_kappa)
+    if regularization:
+        options["regularization"] = regularization
+    if kernel_bandwidth:
+        options["kernel_bandwidth"] = kernel_bandwidth
+    entry = registry.lookup(name)
+    return registry.make(name, model, int(n_particles), seed, **options, **entry.node_options)
 
 
 def check_filter_options(name, *, n_particles, reference, weighting, regularization, resampling,
@@ -103,14 +74,16 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
     from gpf_nav import resampling as resamplers
     from gpf_nav.filters.gpf import METRICS, REFERENCES, WEIGHTINGS
     errors = []
-    if name not in FILTERS:
-        errors.append(f"parameter 'filter' = {name!r} is not a known filter; choose one of {', '.join(FILTERS)}")
+    names = registry.node_names()
+    if name not in names:
+        errors.append(f"parameter 'filter' = {name!r} is not a known filter; choose one of {', '.join(names)}")
         return errors
-    if name in PARTICLE_FILTERS or name == "enkf":
-        minimum = 2 if name == "enkf" else 1
+    entry = registry.lookup(name)
+    minimum = entry.min_particles
+    if minimum is not None:
         if not isinstance(n_particles, (int, np.integer)) or n_particles < minimum:
             errors.append(f"parameter 'n_particles' = {n_particles!r} must be an integer >= {minimum}")
-    if name in PARTICLE_FILTERS:
+    if entry.particles:
         if not (isinstance(ess_threshold, (int, float)) and 0.0 < ess_threshold <= 1.0):
             errors.append(f"parameter 'ess_threshold' (tau) = {ess_threshold!r} must lie in (0, 1]")
         if resampling not in resamplers.SCHEMES:
@@ -120,13 +93,13 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
             errors.append(f"parameter 'regularization' = {regularization!r} must be >= 0 (0: default)")
         if not isinstance(collapse_steps, (int, np.integer)) or collapse_steps < 0:
             errors.append(f"parameter 'collapse_steps' = {collapse_steps!r} must be an integer >= 0")
-    if name in ("gpf", "gpf-mm"):
+    if "switch_time" in entry.options:
         if name == "gpf-mm" and not unmodelled_acceleration_std > 0.0:
             errors.append(f"parameter 'unmodelled_acceleration_std' = {unmodelled_acceleration_std!r} must be "
                           "positive for gpf-mm (its second model is the compensated one) [m/s^2]")
         if not (math.isfinite(model_switch_time) and model_switch_time > 0.0):
             errors.append(f"parameter 'model_switch_time' = {model_switch_time!r} must be positive [s]")
-    if name in GPF_FILTERS:
+    if entry.kind == "gpf":
         if reference not in REFERENCES:
             errors.append(f"parameter 'reference' = {reference!r} must be one of {', '.join(REFERENCES)}")
         if weighting not in WEIGHTINGS:
@@ -145,7 +118,7 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
             errors.append(f"parameter 'nominal_prior' = {nominal_prior!r} must lie in [0, 1)")
         if not (math.isfinite(kernel_bandwidth) and 0.0 <= kernel_bandwidth < 1.0):
             errors.append(f"parameter 'kernel_bandwidth' = {kernel_bandwidth!r} must lie in [0, 1) (0: optimal)")
-    if name == "ukf":
+    if "alpha" in entry.options:
         if not ukf_alpha > 0.0:
             errors.append(f"parameter 'ukf_alpha' = {ukf_alpha!r} must be positive")
         if not state_dim + ukf_kappa > 0.0:

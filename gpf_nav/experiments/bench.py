@@ -1,8 +1,9 @@
 """``gpf-nav bench``: per-step cost (one ``predict`` + one ``update``) of every filter on the lunar model.
 
-"GPF" is the default (navigation-grade) configuration, the multiple-model GPF (two GPFs of N particles
-each), "GPF-paper" the paper's (:data:`PAPER_GPF`), "GPF-single" one navigation-grade GPF of N particles
-on the compensated model (the default before the multiple model).
+The filters are :mod:`gpf_nav.registry` entries, by name (default :data:`FILTERS`): ``gpf`` is the
+default (navigation-grade) configuration, the multiple-model GPF (two GPFs of N particles each),
+``gpf-paper`` the paper's, ``gpf-single`` one navigation-grade GPF of N particles on the compensated model
+(the default before the multiple model), ``spf`` the bootstrap PF without its diagnostic co-state.
 Each filter runs on the same seeded lunar-descent measurements, each step on the next measurement. A step
 is timed over a block of steps. The filters of one group (the particle filters of one N; the Gaussian
 filters and the EnKF) run their blocks in turn, round after round, the order rotating each round, so a
@@ -22,33 +23,31 @@ from dataclasses import replace
 
 import numpy as np
 
-from gpf_nav import allocator
+from gpf_nav import allocator, registry
 from gpf_nav.arguments import CommandParser, positive_int
-from gpf_nav.filters import (BootstrapPF, EnsembleKF, ExtendedKF, GeometricProjectionPF, MultipleModelGPF,
-                             UnscentedKF)
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 
 PARTICLE_COUNTS = (500, 10_000, 100_000)
-PAPER_GPF = {"metric": "euclidean", "weighting": "likelihood", "unmodelled_acceleration_std": 0.0}
-"""The paper's GPF (Euclidean projection, likelihood weights, no compensation): the "GPF-paper" rows."""
+FILTERS = ("gpf", "gpf-paper", "gpf-single", "spf", "ekf", "ukf", "enkf")
+"""The filters timed by default (registry names), in table order."""
 ENSEMBLE_SIZE = 500
+"""Members of an ensemble filter (the particle counts apply to the particle filters only)."""
 
 
-def _groups(particle_counts) -> list[list[tuple[str, int | None, object]]]:
+def _maker(name: str, n: int | None):
+    """``constructor(model, seed)`` of registry filter ``name`` with ``n`` particles or members."""
+    return lambda model, seed: registry.make(name, model, n, seed)
+
+
+def _groups(particle_counts, filters=FILTERS) -> list[list[tuple[str, int | None, object]]]:
     """Groups timed together, each a list of ``(filter name, N or None, constructor(model, seed))`` in table
-    order: the particle filters of each N, then the Gaussian filters and the EnKF."""
-    groups = []
-    for n in particle_counts:
-        groups.append([
-            ("GPF", n, lambda model, seed, n=n: MultipleModelGPF(model, n, seed=seed)),
-            ("GPF-paper", n,
-             lambda model, seed, n=n: GeometricProjectionPF(model, n, seed=seed, **PAPER_GPF)),
-            ("GPF-single", n, lambda model, seed, n=n: GeometricProjectionPF(model, n, seed=seed)),
-            ("SPF", n, lambda model, seed, n=n: BootstrapPF(model, n, seed=seed))])
-    groups.append([("EKF", None, lambda model, seed: ExtendedKF(model, seed=seed)),
-                   ("UKF", None, lambda model, seed: UnscentedKF(model, seed=seed)),
-                   ("EnKF", ENSEMBLE_SIZE, lambda model, seed: EnsembleKF(model, ENSEMBLE_SIZE, seed=seed))])
-    return groups
+    order: the particle filters of each N, then the others (Gaussian and ensemble filters)."""
+    entries = [registry.lookup(name) for name in filters]
+    groups = [[(e.name, n, _maker(e.name, n)) for e in entries if e.particles] for n in particle_counts]
+    others = [(e.name, None if e.min_particles is None else ENSEMBLE_SIZE,
+               _maker(e.name, None if e.min_particles is None else ENSEMBLE_SIZE))
+              for e in entries if not e.particles]
+    return [group for group in (*groups, others) if group]
 
 
 WARMUP = 3
@@ -92,8 +91,8 @@ def time_filter(make, scenario, model, steps: int, repeats: int, warmup: int = W
     return float(np.median(time_filters([make], scenario, model, steps, repeats, warmup)[0]))
 
 
-def run(particle_counts=PARTICLE_COUNTS, repeats: int = 15, seed: int = 0) -> dict:
-    """Benchmark every filter; returns ``{"results": [{"filter", "particles", "us_per_step", "blocks_us"
+def run(particle_counts=PARTICLE_COUNTS, repeats: int = 15, seed: int = 0, filters=FILTERS) -> dict:
+    """Benchmark ``filters`` (registry names); returns ``{"results": [{"filter", "particles", "us_per_step", "blocks_us"
     (per round)}, ...], "gpf_over_spf": {N: ratio},
     "gpf_over_paper_gpf": {N: ratio}, "machine": ...}`` (module docstring)."""
     default = ScenarioConfig()
@@ -101,17 +100,19 @@ def run(particle_counts=PARTICLE_COUNTS, repeats: int = 15, seed: int = 0) -> di
     scenario = generate(config, seed)
     model = filter_model(config)
     results, ratios, paper = [], {}, {}
-    for group in _groups(particle_counts):
-        n = group[0][1]
-        steps = STEPS if n is None or n <= 10_000 else 5
+    for group in _groups(particle_counts, filters):
+        n = max(count or 0 for _, count, _ in group)
+        steps = STEPS if n <= 10_000 else 5
         blocks = time_filters([make for _, _, make in group], scenario, model, steps, repeats)
         for (name, count, _), times in zip(group, blocks):
             results.append({"filter": name, "particles": count, "us_per_step": float(np.median(times)) * 1e6,
                             "blocks_us": [t * 1e6 for t in times]})
-        if group[0][0] == "GPF":
-            by_name = {name: np.asarray(times) for (name, _, _), times in zip(group, blocks)}
-            ratios[str(n)] = float(np.median(by_name["GPF"] / by_name["SPF"]))
-            paper[str(n)] = float(np.median(by_name["GPF"] / by_name["GPF-paper"]))
+        by_name = {name: np.asarray(times) for (name, _, _), times in zip(group, blocks)}
+        if registry.lookup(group[0][0]).particles and "gpf" in by_name:
+            if "spf" in by_name:
+                ratios[str(n)] = float(np.median(by_name["gpf"] / by_name["spf"]))
+            if "gpf-paper" in by_name:
+                paper[str(n)] = float(np.median(by_name["gpf"] / by_name["gpf-paper"]))
     return {"results": results, "gpf_over_spf": ratios, "gpf_over_paper_gpf": paper,
             "machine": {"python": platform.python_version(), "numpy": np.__version__,
                         "processor": platform.machine(),
@@ -139,6 +140,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
     parser.add_argument("--particles", type=positive_int, nargs="+", default=list(PARTICLE_COUNTS),
                         help="particle counts for GPF and SPF (default: 500 10000 100000)")
+    parser.add_argument("--filters", default=",".join(FILTERS),
+                        help=f"comma-separated registry names (default {','.join(FILTERS)})")
     parser.add_argument("--repeats", type=positive_int, default=15,
                         help="rounds of timed blocks (medians taken; default 15)")
     parser.add_argument("--node", action="store_true",
@@ -149,7 +152,11 @@ def main(argv: list[str] | None = None) -> int:
         return int(latency.main(rest + (["--json"] if args.json else [])) or 0)
     if rest:
         parser.error(f"unrecognised arguments: {' '.join(rest)}")
-    report = run(tuple(args.particles), args.repeats)
+    try:
+        filters = tuple(registry.lookup(name.strip()).name for name in args.filters.split(",") if name.strip())
+    except ValueError as err:
+        parser.error(str(err))
+    report = run(tuple(args.particles), args.repeats, filters=filters)
     print(json.dumps(report, indent=2) if args.json else format_table(report))
     return 0
 

@@ -23,7 +23,7 @@ from dataclasses import replace
 import numpy as np
 from threadpoolctl import threadpool_info, threadpool_limits
 
-from gpf_nav.filters import BootstrapPF, GeometricProjectionPF
+from gpf_nav import registry
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 
 
@@ -36,10 +36,11 @@ def _median_seconds(fn, repeats: int) -> float:
     return float(np.median(times))
 
 
-def _filter_step(cls, n: int, repeats: int) -> float:
+def _filter_step(name: str, n: int, repeats: int) -> float:
+    """Median seconds per step of registry filter ``name`` with ``n`` particles."""
     config = replace(ScenarioConfig(), duration=60.0)
     scenario = generate(config, 0)
-    f = cls(filter_model(config), n, seed=0)
+    f = registry.make(name, filter_model(config), n, seed=0)
     f.initialize(scenario.prior_mean, scenario.prior_cov)
     ys = iter(np.tile(scenario.measurements, (repeats // len(scenario.measurements) + 2, 1)))
 
@@ -61,8 +62,8 @@ def run(n: int, repeats: int) -> dict[str, float]:
         label = "default" if threads is None else "1"
         with threadpool_limits(limits=threads, user_api="blas"):
             results[f"np.dot(w, w), BLAS {label}"] = _median_seconds(lambda: np.dot(w, w), repeats * 20)
-            results[f"BootstrapPF step, BLAS {label}"] = _filter_step(BootstrapPF, n, repeats)
-            results[f"GPF step, BLAS {label}"] = _filter_step(GeometricProjectionPF, n, repeats)
+            results[f"BootstrapPF step, BLAS {label}"] = _filter_step("spf", n, repeats)
+            results[f"GPF step, BLAS {label}"] = _filter_step("gpf-single", n, repeats)
     results["np.einsum('i,i->', w, w)"] = _median_seconds(lambda: np.einsum("i,i->", w, w), repeats * 20)
     return results
 

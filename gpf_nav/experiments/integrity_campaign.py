@@ -34,41 +34,33 @@ from pathlib import Path
 
 import numpy as np
 
+from gpf_nav import registry
 from gpf_nav.arguments import CommandParser, positive_int
 from gpf_nav.integrity import CostateMonitor
 from gpf_nav.models.state_space import wrap_angle
 from gpf_nav.models.lunar import MOON_RADIUS, LunarDescentModel
 from gpf_nav.sim.scenario import Scenario, ScenarioConfig, filter_model, generate
 
-VARIANTS = ("GPF", "GPF-paper", "GPF-Q", "SPF", "SPF-2k")
-VARIANT_LABELS = {
-    "GPF": "GPF default (multiple model: nominal and compensated navigation-grade GPFs), N particles each",
-    "GPF-paper": "the paper's GPF (innovation reference, likelihood weights, Euclidean metric), N particles",
-    "GPF-Q": "GPF, process-noise metric, regularization 1, corrected weights, N particles",
-    "SPF": "bootstrap PF with the diagnostic co-state, N particles",
-    "SPF-2k": "bootstrap PF with the diagnostic co-state, 2000 particles, filter process-noise density "
-              "1e-2 m/s^1.5 (10x the truth's): a tuned, nearly consistent reference, not in the paper",
-}
+VARIANTS = {"GPF": "gpf", "GPF-paper": "gpf-paper", "GPF-Q": "gpf-qmetric", "SPF": "spf", "SPF-2k": "spf"}
+"""The campaign's variant (its table rows) -> the :mod:`gpf_nav.registry` filter it runs."""
 _TUNED = {"SPF-2k": (2000, 1e-2)}  # variant: (particles, filter_accel_noise_density)
+VARIANT_LABELS = {
+    variant: f"{registry.label(name)}, " + (f"{_TUNED[variant][0]} particles, filter process-noise density "
+                                            f"{_TUNED[variant][1]:g} m/s^1.5 (10x the truth's): a tuned, nearly "
+                                            "consistent reference, not in the paper"
+                                            if variant in _TUNED else "N particles")
+    for variant, name in VARIANTS.items()}
+"""The legend of each variant: the registry label and the particles (and tuning)."""
 LEVEL_CODES = {"OK": 0, "WARN": 1, "FAULT": 2}
 FIGURES = Path(__file__).resolve().parents[2] / "docs" / "figures"
 
 
 def make_filter(variant: str, model, n_particles: int, seed: int):
-    """The filter of ``variant`` (one of :data:`VARIANTS`)."""
-    from gpf_nav.filters import BootstrapPF, GeometricProjectionPF, MultipleModelGPF
-
-    if variant == "GPF":
-        return MultipleModelGPF(model, n_particles, seed=seed)
-    if variant == "GPF-paper":
-        return GeometricProjectionPF(model, n_particles, metric="euclidean", weighting="likelihood",
-                                     unmodelled_acceleration_std=0.0, seed=seed)
-    if variant == "GPF-Q":
-        return GeometricProjectionPF(model, n_particles, weighting="corrected", metric="process_noise",
-                                     regularization=1.0, unmodelled_acceleration_std=0.0, seed=seed)
-    if variant in ("SPF", "SPF-2k"):
-        return BootstrapPF(model, _TUNED.get(variant, (n_particles,))[0], seed=seed, compute_costate=True)
-    raise ValueError(f"unknown variant {variant!r}; known: {VARIANTS}")
+    """The filter of ``variant`` (one of :data:`VARIANTS`), with its diagnostic co-state."""
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown variant {variant!r}; known: {tuple(VARIANTS)}")
+    n_particles = _TUNED.get(variant, (n_particles,))[0]
+    return registry.make(VARIANTS[variant], model, n_particles, seed, compute_costate=True)
 
 
 @dataclass(frozen=True)
@@ -90,7 +82,7 @@ class Settings:
     gap: int = 2
     false_alarm_rate: float = 1e-3
     warn_false_alarm_rate: float = 1e-2
-    variants: tuple[str, ...] = VARIANTS
+    variants: tuple[str, ...] = tuple(VARIANTS)
     alphas: tuple[float, ...] = (1e-3, 1e-2, 5e-2, 0.1)
     run_alphas: tuple[float, ...] = (1e-6, 1e-5, 1e-4, 1e-3)
 
@@ -688,7 +680,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--gap", type=int, default=d.gap)
     parser.add_argument("--false-alarm-rate", type=float, default=d.false_alarm_rate)
     parser.add_argument("--warn-false-alarm-rate", type=float, default=d.warn_false_alarm_rate)
-    parser.add_argument("--variants", default=",".join(d.variants), help=f"comma list of {VARIANTS}")
+    parser.add_argument("--variants", default=",".join(d.variants), help=f"comma list of {tuple(VARIANTS)}")
     parser.add_argument("--out", type=Path, default=Path("results/integrity"), help="JSON directory")
     parser.add_argument("--figures", type=Path, default=FIGURES, help="figure directory")
     parser.add_argument("--no-plots", action="store_true")
@@ -699,7 +691,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     variants = tuple(v.strip() for v in args.variants.split(",") if v.strip())
     if not variants or any(v not in VARIANTS for v in variants):
-        parser.error(f"--variants must be a comma list of {VARIANTS}")
+        parser.error(f"--variants must be a comma list of {tuple(VARIANTS)}")
     try:
         lists = {name: _floats(getattr(args, name)) for name in ("gravity_scales", "range_biases", "azimuth_biases")}
     except ValueError:

@@ -35,9 +35,8 @@ import numpy as np
 from gpf_nav.arguments import CommandParser, positive_float, positive_int
 from gpf_nav.experiments import metrics
 from gpf_nav.experiments.parallel import default_workers, map_tasks
-from gpf_nav.experiments.runner import (ALIASES, DEFAULT_PARTICLES, EXTRA_FILTERS, FILTERS, GPF_DEFAULT,
-                                        GPF_NAV, GPF_PRINTED, PARTICLE_FILTERS, RunTask, run_task,
-                                        select_oracle)
+from gpf_nav import registry
+from gpf_nav.experiments.runner import DEFAULT_PARTICLES, FILTERS, RunTask, run_task, select_oracle
 from gpf_nav.sim.scenario import CASES, ScenarioConfig
 
 SCHEMA = "gpf_nav.montecarlo/1"
@@ -79,7 +78,7 @@ def add_common_arguments(parser: argparse.ArgumentParser, runs: int) -> None:
                         help="comma-separated short names (default: gpf, ekf-comp, ekf-oracle, "
                              "ukf-oracle and the paper's seven rows gpf-paper, gpf-printed, gpf-exact, spf, "
                              "ekf, ukf, enkf); also available: " + ", ".join(
-                             f"{k} = {v}" for k, v in ALIASES.items() if v in EXTRA_FILTERS))
+                             f"{e.name} = {e.label}" for e in registry.ENTRIES.values() if e.table == "extra"))
     parser.add_argument("--cases", default="full,partial", help="comma-separated cases (full,partial)")
     parser.add_argument("--divergence-km", type=positive_float, default=1000.0,
                         help="position error counted as divergence (km, default 1000)")
@@ -101,11 +100,12 @@ def parse_filters(text: str | None) -> tuple[str, ...]:
     if not text:
         return FILTERS
     keys = [n.strip().lower() for n in text.split(",") if n.strip()]
-    unknown = [k for k in keys if k not in ALIASES]
+    names = registry.short_names()
+    unknown = [k for k in keys if k not in names]
     if unknown or not keys:
         raise ValueError(f"--filters: unknown filter(s) {unknown}; known: "
-                         + ", ".join(f"{k} = {v}" for k, v in ALIASES.items()))
-    return tuple(dict.fromkeys(ALIASES[k] for k in keys))
+                         + ", ".join(f"{e.name} = {e.label}" for e in registry.ENTRIES.values()))
+    return tuple(dict.fromkeys(registry.label(k) for k in keys))
 
 
 def parse_cases(text: str) -> tuple[str, ...]:
@@ -172,7 +172,7 @@ def summarise_case(results: list[dict], filters: tuple[str, ...], reference: str
     for name in filters:
         row = {}
         for metric, (key, scale, _) in METRICS.items():
-            if key in ("ess", "costate_norm", "resample_rate") and name not in PARTICLE_FILTERS:
+            if key in ("ess", "costate_norm", "resample_rate") and not registry.lookup(name).particles:
                 row[metric] = {"mean": None, "std": None, "n": 0}
             else:
                 row[metric] = metrics.mean_std(per_run_values(results, name, key, scale))
@@ -207,7 +207,7 @@ def series_statistics(results: list[dict], filters: tuple[str, ...], runs: int, 
     for name in filters:
         nees = stack_series(results, name, "nees")
         out["nees_in_band"][name] = metrics.fraction_in_band(np.mean(nees, axis=0), band)
-        if name not in PARTICLE_FILTERS:
+        if not registry.lookup(name).particles:
             continue
         ess = stack_series(results, name, "ess")
         costate = stack_series(results, name, "costate_norm")
@@ -320,7 +320,7 @@ def campaign(config: ScenarioConfig, cases=("full", "partial"), runs: int = 100,
     tasks = build_tasks(config, cases, runs, seed, tuple(filters), n_particles, divergence_km * 1e3, series)
     results = map_tasks(run_task, tasks, workers=workers, scheduler=scheduler, progress=progress,
                         description="Monte Carlo runs")
-    reference = next((f for f in (GPF_NAV, GPF_DEFAULT) if f in filters), None)
+    reference = next((f for f in map(registry.label, ("gpf", "gpf-paper")) if f in filters), None)
     report = {"schema": SCHEMA,
               "settings": {"runs": runs, "seed": seed, "n_particles": n_particles, "filters": list(filters),
                            "reference_filter": reference, "divergence_km": divergence_km,
@@ -347,7 +347,7 @@ def campaign(config: ScenarioConfig, cases=("full", "partial"), runs: int = 100,
             extra = series_statistics(case_results, tuple(filters), runs)
             figures["cases"][case] = {
                 "position_error": {n: stack_series(case_results, n, "position_error") for n in filters},
-                "ess": {n: stack_series(case_results, n, "ess") for n in filters if n in PARTICLE_FILTERS},
+                "ess": {n: stack_series(case_results, n, "ess") for n in filters if registry.lookup(n).particles},
                 "nees": {n: stack_series(case_results, n, "nees") for n in filters},
                 "points": extra.pop("points"), "correlations": extra["correlations"],
                 "band": (extra["nees_band"]["lower"], extra["nees_band"]["upper"])}
@@ -376,7 +376,8 @@ def draw_figures(report: dict, figures: dict, out: Path) -> list[Path]:
     if any(d["ess"] for d in cases.values()):
         paths.append(plots.ess_evolution(times, {c: d["ess"] for c, d in cases.items()}, runs,
                                          report["settings"]["ess_threshold"], out / "ess.png"))
-    degeneracy = {c: {n: p for n, p in d["points"].items() if n in ("SPF", GPF_NAV, GPF_DEFAULT, GPF_PRINTED)}
+    shown = tuple(map(registry.label, ("spf", "gpf", "gpf-paper", "gpf-printed")))
+    degeneracy = {c: {n: p for n, p in d["points"].items() if n in shown}
                   for c, d in cases.items()}
     if any(degeneracy.values()):
         paths.append(plots.costate_degeneracy(degeneracy, {c: d["correlations"] for c, d in cases.items()},

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gpf_nav import registry
 from gpf_nav.experiments import metrics
 from gpf_nav.integrity import ConsistencyMonitor, innovation_moments
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate, undetermined_subspace
@@ -36,30 +37,12 @@ NAMED_COSINE = 0.95
 """An undetermined subspace is *named* when its dimension is right and every principal angle to the
 scenario's known one is below arccos of this (18 degrees), in the no-data standard deviations."""
 
-GPF_DEFAULT = "GPF (innovation, likelihood)"
-"""The paper's GPF as its experiments run it (the reference row of Table 1)."""
-GPF_PRINTED = "GPF as printed (increment, likelihood)"
-GPF_EXACT = "GPF exact (innovation, corrected)"
-GPF_QMETRIC = "GPF Q-metric (innovation, corrected, eps=1)"
-GPF_NAV = "GPF navigation (default)"
-"""``MultipleModelGPF(model)`` (``make_filter("gpf")``, the node's default): the IMM of two
-navigation-grade GPFs (cloud metric, exact weights, tempering), on the nominal and on the compensated
-model."""
-GPF_SINGLE = "GPF single model (compensated)"
-"""``GeometricProjectionPF(model)``: one navigation-grade GPF on the compensated model, the estimate
-averaged with the nominal hypothesis by Savage-Dickey (the default before the IMM)."""
-EKF_COMPENSATED = "EKF + compensation"
-"""EKF with the same unmodelled-acceleration compensation and tuning as :data:`GPF_NAV`."""
-EKF_COMPENSATED_GATED = "EKF + compensation, gated"
-""":data:`EKF_COMPENSATED` with the GPF's innovation gate too (same gate and limit as :data:`GPF_NAV`)."""
-PAPER_GPF = {"metric": "euclidean", "weighting": "likelihood", "unmodelled_acceleration_std": 0.0}
-"""Options of the paper's GPF rows on top of :class:`GeometricProjectionPF`'s defaults."""
-
 ORACLE_GRID = tuple(10.0 ** k for k in range(8))
 """Process-noise variance multipliers searched by the oracle-tuned rows (x1 ... x1e7)."""
-ORACLE_FAMILIES = {"EKF, oracle-tuned Q": "EKF", "UKF, oracle-tuned Q": "UKF"}
-"""Oracle-tuned rows and the filter they tune: per case and swept value, the grid member with the
-lowest mean position RMSE over the runs (it has seen the truth: not a filter a user could run)."""
+ORACLE_FAMILIES = {e.label: registry.label(e.tunes) for e in registry.ENTRIES.values() if e.tunes}
+"""Oracle-tuned rows (label) and the label of the filter they tune: per case and swept value, the grid
+member with the lowest mean position RMSE over the runs (it has seen the truth: not a filter a user could
+run)."""
 
 
 def grid_name(family: str, multiplier: float) -> str:
@@ -91,38 +74,13 @@ def select_oracle(results: list[dict], filters: tuple[str, ...]) -> dict:
     return chosen
 
 
-def _make_filter(name: str, model, n_particles: int, seed):
-    """Construct the filter named ``name`` (one of :data:`FILTERS`, :data:`EXTRA_FILTERS` or an oracle
-    grid member)."""
-    from gpf_nav.filters import BootstrapPF, CompensatedEKF, GeometricProjectionPF, MultipleModelGPF
-    from gpf_nav.filters.gating import OUTLIER_GATE, OUTLIER_GATE_LIMIT
-
-    if name == GPF_NAV:
-        return MultipleModelGPF(model, n_particles, seed=seed)
-    if name == GPF_SINGLE:
-        return GeometricProjectionPF(model, n_particles, seed=seed)
-    if name == EKF_COMPENSATED:
-        return CompensatedEKF(model, seed=seed)
-    if name == EKF_COMPENSATED_GATED:
-        return CompensatedEKF(model, seed=seed, outlier_gate=OUTLIER_GATE, outlier_gate_limit=OUTLIER_GATE_LIMIT)
-    if name == GPF_DEFAULT:
-        return GeometricProjectionPF(model, n_particles, reference="innovation", seed=seed, **PAPER_GPF)
-    if name == GPF_PRINTED:
-        return GeometricProjectionPF(model, n_particles, reference="increment", seed=seed, **PAPER_GPF)
-    if name == GPF_EXACT:
-        return GeometricProjectionPF(model, n_particles, reference="innovation", seed=seed,
-                                     **{**PAPER_GPF, "weighting": "corrected"})
-    if name == GPF_QMETRIC:
-        return GeometricProjectionPF(model, n_particles, reference="innovation", weighting="corrected",
-                                     metric="process_noise", regularization=1.0,
-                                     unmodelled_acceleration_std=0.0, seed=seed)
-    if name == "SPF":
-        return BootstrapPF(model, n_particles, seed=seed, compute_costate=True)
-    if name in ("EKF", "UKF") or name.split(",")[0] in ("EKF", "UKF"):
-        return _kalman({"EKF": "ExtendedKF", "UKF": "UnscentedKF"}[name.split(",")[0]])(model, seed=seed)
-    if name == "EnKF":
-        return _kalman("EnsembleKF")(model, n_particles, seed=seed)
-    raise ValueError(f"unknown filter {name!r}; known: {list(FILTERS) + list(EXTRA_FILTERS)}")
+def make_filter(name: str, model, n_particles: int, seed):
+    """Construct the filter ``name`` (a :mod:`gpf_nav.registry` name or label, or an oracle grid member
+    ``"<label>, Q x<m>"``, built as the filter it tunes), with the diagnostic co-state where the filter
+    offers it."""
+    if ", Q x" in name:
+        name = name.split(", Q x")[0]
+    return registry.make(name, model, n_particles, seed, compute_costate=True)
 
 
 def filter_model_of(name: str, config: ScenarioConfig):
@@ -135,34 +93,10 @@ def filter_model_of(name: str, config: ScenarioConfig):
     return filter_model(config)
 
 
-def _kalman(cls_name: str):
-    import gpf_nav.filters as filters
-
-    if hasattr(filters, cls_name):
-        return getattr(filters, cls_name)
-    module = "gpf_nav.filters.ensemble" if cls_name == "EnsembleKF" else "gpf_nav.filters.kalman"
-    import importlib
-
-    return getattr(importlib.import_module(module), cls_name)
-
-
-PAPER_FILTERS = (GPF_DEFAULT, GPF_PRINTED, GPF_EXACT, "SPF", "EKF", "UKF", "EnKF")
-"""The rows of the paper's Table 1, in display order (all with N = 500 particles / members)."""
-FILTERS = (GPF_NAV, EKF_COMPENSATED, "EKF, oracle-tuned Q", "UKF, oracle-tuned Q") + PAPER_FILTERS
+FILTERS = registry.labels("navigation", "paper")
 """The rows of the Monte Carlo table and the sweeps: the navigation-grade GPF, its fair baselines
-(the same compensation; oracle-tuned process noise), then the paper's rows."""
-EXTRA_FILTERS = (GPF_SINGLE, GPF_QMETRIC, EKF_COMPENSATED_GATED)
-"""Filters that can be asked for with ``--filters`` but are not part of the default campaign."""
-PARTICLE_FILTERS = (GPF_NAV, GPF_SINGLE, GPF_DEFAULT, GPF_PRINTED, GPF_EXACT, GPF_QMETRIC, "SPF")
-"""Filters that have an ESS and a co-state."""
-
-
-ALIASES = {"gpf": GPF_NAV, "gpf-mm": GPF_NAV, "gpf-single": GPF_SINGLE, "ekf-comp": EKF_COMPENSATED,
-           "ekf-comp-gated": EKF_COMPENSATED_GATED, "ekf-oracle": "EKF, oracle-tuned Q",
-           "ukf-oracle": "UKF, oracle-tuned Q", "gpf-paper": GPF_DEFAULT, "gpf-printed": GPF_PRINTED,
-           "gpf-exact": GPF_EXACT, "gpf-qmetric": GPF_QMETRIC, "spf": "SPF", "ekf": "EKF", "ukf": "UKF",
-           "enkf": "EnKF"}
-"""Short command-line names of the filters (the display names contain commas)."""
+(the same compensation; oracle-tuned process noise), then the paper's rows (all with N = 500 particles /
+members)."""
 
 
 def run_seeds(seed: int, run: int) -> tuple[int, int]:
@@ -323,7 +257,7 @@ def run_task(task: RunTask) -> dict:
     out = {"index": task.index, "run": task.run, "case": task.config.case, "tag": dict(task.tag),
            "filters": {}}
     for name in expand_filters(task.filters):
-        flt = _make_filter(name, filter_model_of(name, task.config), task.n_particles, filter_seed)
+        flt = make_filter(name, filter_model_of(name, task.config), task.n_particles, filter_seed)
         summary = run_filter(flt, scenario, task.divergence_bound)
         if not task.series:
             del summary["series"]

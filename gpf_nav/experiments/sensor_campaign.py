@@ -28,11 +28,12 @@ import numpy as np
 
 from scipy.stats import chi2
 
+from gpf_nav import registry
 from gpf_nav.arguments import CommandParser, positive_float, positive_int
 from gpf_nav.experiments import metrics
 from gpf_nav.experiments.montecarlo import git_commit, parse_filters, write_json
 from gpf_nav.experiments.parallel import map_tasks
-from gpf_nav.experiments.runner import ALIASES, DEFAULT_PARTICLES, _make_filter, run_seeds
+from gpf_nav.experiments.runner import DEFAULT_PARTICLES, make_filter, run_seeds
 from gpf_nav.filters import SensorBiasFilter
 from gpf_nav.filters.gating import OUTLIER_GATE_LIMIT
 from gpf_nav.models.lunar import MOON_RADIUS
@@ -42,7 +43,7 @@ from gpf_nav.sensors import ModelSensor, innovation_distance, random_constant_bi
 
 SCHEMA = "gpf_nav.sensor_campaign/1"
 MODES = ("rae", "full")
-DEFAULT_FILTERS = (ALIASES["gpf"], ALIASES["ekf-comp-gated"])
+DEFAULT_FILTERS = (registry.label("gpf"), registry.label("ekf-comp-gated"))
 FIX_GATE = 0.999
 """Default chi-square quantile of the campaign's whole-fix gate (:func:`fuse`)."""
 _SAME_TIME = 1e-9  # s: a fix arriving within this of a step arrives at that step
@@ -170,9 +171,9 @@ def run_task(task: SuiteTask) -> dict:
 def _build(name: str, model, task: SuiteTask, seed: int):
     """Filter ``name`` on ``model``, with a range-bias state when ``task.range_bias_std`` > 0."""
     if not task.range_bias_std:
-        return _make_filter(name, model, task.n_particles, seed)
+        return make_filter(name, model, task.n_particles, seed)
     rae = ModelSensor(model, "rae", bias=random_constant_bias([task.range_bias_std, 0.0, 0.0]))
-    return SensorBiasFilter(lambda m: _make_filter(name, m, task.n_particles, seed), model, [rae])
+    return SensorBiasFilter(lambda m: make_filter(name, m, task.n_particles, seed), model, [rae])
 
 
 def _rmse(series: np.ndarray) -> float:

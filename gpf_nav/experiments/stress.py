@@ -40,11 +40,11 @@ from pathlib import Path
 
 import numpy as np
 
+from gpf_nav import registry
 from gpf_nav.arguments import CommandParser, positive_float, positive_int
 from gpf_nav.experiments.montecarlo import base_config, git_commit, parse_filters, run_metadata, write_json
 from gpf_nav.experiments.parallel import map_tasks
-from gpf_nav.experiments.runner import (ALIASES, DEFAULT_PARTICLES, PARTICLE_FILTERS, RunTask, run_task,
-                                        select_oracle)
+from gpf_nav.experiments.runner import DEFAULT_PARTICLES, RunTask, run_task, select_oracle
 from gpf_nav.sim.scenario import ScenarioConfig
 
 SCHEMA = "gpf_nav.stress/1"
@@ -129,7 +129,7 @@ def summarise(chunk: list[dict], name: str, bound: float) -> dict:
         return float(reduce(values)) if values.size else None
 
     worst = int(np.argmax(np.where(finite, position, -np.inf))) if finite.any() else None
-    particle = name in PARTICLE_FILTERS
+    particle = registry.lookup(name).particles
     return {
         "position_rmse_mean": stat("position_rmse", np.mean),
         "position_rmse_median": stat("position_rmse", np.median),
@@ -225,7 +225,7 @@ def main(argv: list[str] | None = None) -> int:
                         help=f"particles per particle filter (default {DEFAULT_PARTICLES})")
     parser.add_argument("--filters", default=DEFAULT_FILTERS,
                         help=f"comma-separated short names (default {DEFAULT_FILTERS}); known: "
-                             + ", ".join(ALIASES))
+                             + ", ".join(registry.short_names()))
     parser.add_argument("--conditions", default=",".join(CONDITIONS),
                         help=f"comma-separated fixed conditions (default: {', '.join(CONDITIONS)}; "
                              f"beyond the envelope, when named: {', '.join(BEYOND)})")

@@ -29,14 +29,14 @@ from pathlib import Path
 
 import numpy as np
 
+from gpf_nav import registry
 from gpf_nav.arguments import CommandParser
 from gpf_nav.experiments import metrics
 from gpf_nav.experiments.montecarlo import (add_common_arguments, base_config, git_commit, parse_cases,
                                             parse_filters,
                                             per_run_values, run_metadata, write_json)
 from gpf_nav.experiments.parallel import map_tasks
-from gpf_nav.experiments.runner import (EXTRA_FILTERS, FILTERS, ORACLE_FAMILIES, PARTICLE_FILTERS, RunTask, run_task,
-                                        select_oracle)
+from gpf_nav.experiments.runner import FILTERS, RunTask, run_task, select_oracle
 from gpf_nav.sim.scenario import ScenarioConfig
 
 SCHEMA = "gpf_nav.sweep/2"
@@ -78,7 +78,7 @@ def sweep(param: str, values, config, cases, runs: int, seed: int, filters, n_pa
             for name in filters:
                 rows = entry["filters"][name]
                 for key, (summary_key, scale) in COLUMNS.items():
-                    if summary_key == "ess" and name not in PARTICLE_FILTERS:
+                    if summary_key == "ess" and not registry.lookup(name).particles:
                         rows[key].append({"mean": None, "std": None, "n": 0})
                     else:
                         rows[key].append(metrics.mean_std(per_run_values(chunk, name, summary_key, scale)))
@@ -124,7 +124,7 @@ def merge(earlier: dict, update: dict) -> dict:
     check_same_sweep(earlier, update["param"], update["values"], update["cases"], update["settings"])
     merged = json.loads(json.dumps(earlier))
     names = update["settings"]["filters"]
-    known = set(FILTERS) | set(EXTRA_FILTERS) | set(ORACLE_FAMILIES)
+    known = {e.label for e in registry.ENTRIES.values()}
     dropped = [f for f in merged["settings"]["filters"] if f not in known and f not in names]
     merged["settings"]["filters"] = list(dict.fromkeys(
         [f for f in merged["settings"]["filters"] if f not in dropped] + list(names)))

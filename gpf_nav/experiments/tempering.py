@@ -18,6 +18,7 @@ import time
 
 import numpy as np
 
+from gpf_nav import registry
 from gpf_nav.experiments.parallel import map_tasks
 from gpf_nav.experiments.runner import run_filter, run_seeds
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
@@ -29,13 +30,8 @@ VARIANTS = {
     "no tempering, collapse fallback": {"tempering_ess": 0.0, "collapse_steps": 1},
 }
 """Variant name -> options of every GeometricProjectionPF of the variant."""
-
-
-def _make(structure: str, options: dict, model, n_particles: int, seed: int):
-    from gpf_nav.filters import GeometricProjectionPF, MultipleModelGPF
-    if structure == "single":
-        return GeometricProjectionPF(model, n_particles, seed=seed, **options)
-    return MultipleModelGPF(model, n_particles, seed=seed, **options)
+STRUCTURES = {"single": "gpf-single", "multiple model": "gpf"}
+"""Table column -> the :mod:`gpf_nav.registry` GPF each variant runs as."""
 
 
 def run_one(task: tuple) -> dict:
@@ -44,9 +40,9 @@ def run_one(task: tuple) -> dict:
     scenario_seed, filter_seed = run_seeds(seed, run)
     scenario = generate(config, scenario_seed)
     out = {}
-    for structure in ("single", "multiple model"):
+    for structure, filter_name in STRUCTURES.items():
         for name, options in VARIANTS.items():
-            flt = _make(structure, options, filter_model(config), n_particles, filter_seed)
+            flt = registry.make(filter_name, filter_model(config), n_particles, filter_seed, **options)
             summary = run_filter(flt, scenario)
             summary.pop("series")
             summary["tempered"] = getattr(flt, "tempered_updates", 0)
