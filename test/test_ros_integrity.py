@@ -102,7 +102,7 @@ def test_engine_feeds_holds_and_resets_the_monitor():
 
 
 def test_engine_latches_with_a_negative_hold_and_masks_the_increment_reference():
-    """The mask is the filter's ``costate_measured``, or the engine's own rule for a filter without it."""
+    """The mask is the filter's ``costate_measured`` (part of the co-state capability of the interface)."""
     s = generate(CLEAN, 0)
     clock = _Clock()
     eng = _engine(s, clock=clock, monitor_hold=-1.0)
@@ -122,31 +122,17 @@ def test_engine_latches_with_a_negative_hold_and_masks_the_increment_reference()
     # increment reference: a component not measured at the previous update has no co-state
     inc = EstimatorEngine(lambda: make_filter("gpf", filter_model(CLEAN), n_particles=100, seed=1,
                                               reference="increment", metric="euclidean"), filter_model(CLEAN), eng.config, clock)
-    class _NoMask:  # a filter without costate_measured: the engine's own rule
-        def __init__(self, inner):
-            self.inner = inner
-
-        def __getattr__(self, name):
-            if name in ("costate_measured", "inner"):  # inner: not set yet in a copy.deepcopy
-                raise AttributeError(name)
-            return getattr(self.inner, name)
-
-    own = EstimatorEngine(lambda: _NoMask(make_filter("gpf", filter_model(CLEAN), n_particles=100, seed=1,
-                                                      reference="increment", metric="euclidean")),
-                          filter_model(CLEAN), eng.config, clock)
-    for engine in (inc, own):
-        masks = []
-        update = engine.monitor.update
-        engine.monitor.update = lambda lam, measured, update=update, masks=masks: (
-            masks.append(np.asarray(measured).tolist()) or update(lam, measured))
-        for k in range(6):
-            y = s.measurements[k].copy()
-            if k == 2:
-                y[1] = np.nan
-            engine.measurement(_stamp(s, k), y, None)
-        # update 0 has no previous measurement; the azimuth is missing at update 2, and before update 3
-        assert masks == [[False] * 3, [True] * 3, [True, False, True], [True, False, True], [True] * 3, [True] * 3]
-        assert engine.monitor.unmeasured == 1 and engine.monitor.samples == 5
+    masks = []
+    update = inc.monitor.update
+    inc.monitor.update = lambda lam, measured: masks.append(np.asarray(measured).tolist()) or update(lam, measured)
+    for k in range(6):
+        y = s.measurements[k].copy()
+        if k == 2:
+            y[1] = np.nan
+        inc.measurement(_stamp(s, k), y, None)
+    # update 0 has no previous measurement; the azimuth is missing at update 2, and before update 3
+    assert masks == [[False] * 3, [True] * 3, [True, False, True], [True, False, True], [True] * 3, [True] * 3]
+    assert inc.monitor.unmeasured == 1 and inc.monitor.samples == 5
 
 
 def test_engine_recovery_resets_the_monitor_and_ekf_has_none():

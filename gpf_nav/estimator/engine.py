@@ -47,6 +47,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from gpf_nav.filters import SensorBiasFilter
+from gpf_nav.filters.interface import COMPENSATION, COSTATE, GATE, MODEL_PROBABILITIES, RESAMPLING, TEMPERING
 from gpf_nav.integrity import CostateMonitor, IntegrityStatus
 from gpf_nav.estimator.history import Entry, History
 from gpf_nav.estimator.initialization import batch_initial_state
@@ -191,7 +192,7 @@ class EstimatorEngine:
         fresh = self.factory()
         fresh.initialize(mean, cov)  # may raise: then nothing has changed
         self.filter = fresh
-        self._core_recoveries = getattr(self.filter, "recoveries", 0)
+        self._core_recoveries = self.filter.recoveries
         self.t_ns = int(t_ns)
         self._init_ns = int(t_ns)
         self.init_source = source
@@ -268,7 +269,7 @@ class EstimatorEngine:
         redo = self.history.take(self.history.split(stamp_ns))
         first = redo[0]
         self.filter, self.t_ns, self._streaks = first.before, first.before_ns, dict(first.streaks)
-        self._core_recoveries = getattr(self.filter, "recoveries", 0)
+        self._core_recoveries = self.filter.recoveries
         self._shadow = None
         reason = self._update(stamp_ns, y, stream, sensor)
         for entry in redo:
@@ -302,9 +303,7 @@ class EstimatorEngine:
         if gated:
             return "innovation_gate"
         if not self._check_core_recovery() and feed_monitor and sensor is None:
-            self._feed_monitor(y)
-        if sensor is None:
-            self._prev_y = y
+            self._feed_monitor()
         self.last_update_ns = stamp_ns
         return ""
 
@@ -330,7 +329,7 @@ class EstimatorEngine:
             sensor, mean, cov = self.filter.predicted_estimate(sensor)
         else:
             mean, cov = self.filter.mean, self.filter.covariance
-        d2, k = innovation_distance(sensor, y, mean, cov, getattr(self.filter, "time", 0.0))
+        d2, k = innovation_distance(sensor, y, mean, cov, self.filter.time)
         if k == 0 or d2 <= _chi2_threshold(probability, k):
             self._streaks[stream] = 0
             return False
@@ -343,11 +342,11 @@ class EstimatorEngine:
 
     def _check_core_recovery(self) -> bool:
         """Count a re-initialisation the core filter did by itself (and reset the monitor); True if so."""
-        recoveries = getattr(self.filter, "recoveries", 0)
+        recoveries = self.filter.recoveries
         recovered = recoveries > self._core_recoveries
         if recovered:
             self.reinit_count += recoveries - self._core_recoveries
-            self.last_reinit_reason = f"core filter recovery: {getattr(self.filter, 'last_recovery_reason', '')}"
+            self.last_reinit_reason = f"core filter recovery: {self.filter.last_recovery_reason}"
             self._last_reinit_time = self.monotonic()
             self._reset_monitor()
         self._core_recoveries = recoveries
@@ -518,7 +517,6 @@ class EstimatorEngine:
 
     # --- integrity -------------------------------------------------------------------------------------
     def _reset_monitor(self) -> None:
-        self._prev_y: np.ndarray | None = None  # y of the filter's last update (increment reference)
         if self.monitor is None:
             return
         if self.monitor.samples or getattr(self, "_skipped", 0):
@@ -527,22 +525,15 @@ class EstimatorEngine:
         self._skipped = 0
         self._alarms: dict[str, tuple[float, IntegrityStatus]] = {}
 
-    def _feed_monitor(self, y: np.ndarray) -> None:
-        """Give the monitor the co-state of the update just made (never raises). The measured mask is
-        the filter's ``costate_measured`` (the components its last co-state covers). For a filter
-        without it: ``isfinite(y)``, and also ``isfinite(y_previous)`` for the GPF's increment
-        reference (its co-state is zero for a component not measured at the previous update)."""
+    def _feed_monitor(self) -> None:
+        """Give the monitor the co-state of the update just made (never raises), over the components its
+        last co-state covers (the filter's ``costate_measured``)."""
         if self.monitor is None or not self.has_costate:
             return
         if self._last_dt <= 0.0:
             self._skipped += 1
             return
-        if hasattr(self.filter, "costate_measured"):
-            measured = np.array(self.filter.costate_measured, dtype=bool)
-        else:
-            measured = np.isfinite(y)
-            if getattr(self.filter, "reference", None) == "increment":
-                measured &= np.isfinite(self._prev_y) if self._prev_y is not None else False
+        measured = np.array(self.filter.costate_measured, dtype=bool)
         try:
             status = self.monitor.update(np.asarray(self.filter.costate_mean, dtype=float), measured)
         except Exception as err:  # noqa: BLE001 - e.g. a co-state of another shape: start again
@@ -602,20 +593,19 @@ class EstimatorEngine:
         out = {}
         if not self.initialized:
             return out
-        if hasattr(f, "ess"):
+        if RESAMPLING in f.capabilities:
             out["ess"] = float(f.ess)
             out["resample_count"] = int(f.resample_count)
         if self.has_costate:
             out["costate_norm_mean"] = float(f.costate_norm_mean)
             out["costate_norm_max"] = float(f.costate_norm_max)
-        if hasattr(f, "gated"):
+        if GATE in f.capabilities:
             out["gated"] = int(f.gated)
-        if hasattr(f, "tempered_updates"):
+        if TEMPERING in f.capabilities:
             out["tempered_updates"] = int(f.tempered_updates)
-        probabilities = getattr(f, "model_probabilities", None)
-        if probabilities is not None:
-            out["compensated_model_probability"] = float(probabilities[1])
-        if np.size(getattr(f, "unmodelled_acceleration", ())):  # a filter with compensation on
+        if MODEL_PROBABILITIES in f.capabilities:
+            out["compensated_model_probability"] = float(f.model_probabilities[1])
+        if COMPENSATION in f.capabilities:
             acceleration = np.asarray(f.unmodelled_acceleration, dtype=float)
             sigma = np.sqrt(np.clip(np.diag(f.unmodelled_acceleration_covariance), 0.0, None))
             if np.all(np.isfinite(acceleration)) and np.all(np.isfinite(sigma)):
@@ -626,5 +616,4 @@ class EstimatorEngine:
     @property
     def has_costate(self) -> bool:
         """True when the filter computes a geometric co-state (the GPF; the SPF with compute_costate)."""
-        f = self.filter
-        return hasattr(f, "costate_mean") and (not hasattr(f, "compute_costate") or bool(f.compute_costate))
+        return COSTATE in self.filter.capabilities

@@ -22,6 +22,7 @@ import numpy as np
 
 from gpf_nav import registry
 from gpf_nav.experiments import metrics
+from gpf_nav.filters.interface import RESAMPLING
 from gpf_nav.integrity import ConsistencyMonitor, innovation_moments
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate, undetermined_subspace
 from gpf_nav.sensors.model import ModelSensor
@@ -160,7 +161,7 @@ def run_filter(flt, scenario, divergence_bound: float = DEFAULT_DIVERGENCE_BOUND
     fault = np.zeros(steps, dtype=bool)
     monitor = ConsistencyMonitor()
     sensor = ModelSensor(filter_model(scenario.config))
-    is_particle = hasattr(flt, "ess")
+    is_particle = RESAMPLING in flt.capabilities
     error = None
     start = time.perf_counter()
     try:

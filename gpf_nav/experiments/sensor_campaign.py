@@ -127,9 +127,9 @@ def fuse(flt, scenario, suite: SuiteData | None, fix_gate: float = 0.0) -> dict:
     return {"position_error": np.linalg.norm(errors[:, :3], axis=1),
             "velocity_error": np.linalg.norm(errors[:, 3:], axis=1),
             "nees": metrics.nees(errors, covariances), "fixes": fused, "refused": sum(refused.values()),
-            "gated": int(getattr(flt, "gated", 0)), "seconds": time.perf_counter() - start, "error": error,
+            "gated": int(flt.gated), "seconds": time.perf_counter() - start, "error": error,
             "range_bias": (tuple(float(v[0]) for v in flt.sensor_bias("rae"))
-                           if "rae" in getattr(flt, "sensor_names", ()) else None)}
+                           if "rae" in flt.sensor_names else None)}
 
 
 @dataclass(frozen=True)

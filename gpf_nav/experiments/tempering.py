@@ -45,7 +45,7 @@ def run_one(task: tuple) -> dict:
             flt = registry.make(filter_name, filter_model(config), n_particles, filter_seed, **options)
             summary = run_filter(flt, scenario)
             summary.pop("series")
-            summary["tempered"] = getattr(flt, "tempered_updates", 0)
+            summary["tempered"] = flt.tempered_updates
             out[(structure, name)] = summary
     return out
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from gpf_nav.filters.gating import OUTLIER_GATE_LIMIT
+from gpf_nav.filters.interface import COMPENSATION, MODEL_PROBABILITIES
 from gpf_nav.filters.kalman import ExtendedKF
 from gpf_nav.filters.model_averaging import NOMINAL_PRIOR, mixture_moments, model_average
 from gpf_nav.linalg import positive_definite
@@ -56,6 +57,15 @@ class ModelErrorCompensated:
     def compensated(self) -> bool:
         """True when the filter estimates an unmodelled acceleration."""
         return self.model is not self.nominal_model
+
+    @property
+    def capabilities(self) -> frozenset[str]:
+        """The filter's, with :data:`~gpf_nav.filters.interface.COMPENSATION` when compensated and
+        :data:`~gpf_nav.filters.interface.MODEL_PROBABILITIES` when the estimate is a model average."""
+        extra = {COMPENSATION} if self.compensated else set()
+        if self.compensated and self.nominal_prior > 0.0:
+            extra.add(MODEL_PROBABILITIES)
+        return super().capabilities | extra
 
     def initialize(self, mean, cov, t0=0.0):
         """Start from the user's prior ``N(mean (n,), cov (n, n))`` at filter time ``t0``, the unmodelled

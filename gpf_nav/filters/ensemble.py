@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpf_nav.filters.interface import Filter
+from gpf_nav.filters.interface import CLOUD, Filter
 from gpf_nav.filters.kalman import ModelNoise, innovation_solve, readonly_view
 from gpf_nav.linalg import positive_definite, psd_sqrt
 from gpf_nav.models.state_space import StateSpaceModel
@@ -92,6 +92,11 @@ class EnsembleKF(Filter):
         innovations += self.rng.standard_normal(innovations.shape) @ self._noise.measurement_sqrt(mask, R).T
         self._X = X + innovations @ Kt
         self._guard(True, self.mean, self.covariance)
+
+    @property
+    def capabilities(self) -> frozenset[str]:
+        """An ensemble of equally weighted members."""
+        return frozenset({CLOUD})
 
     @property
     def particles(self) -> np.ndarray:

@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 
+from gpf_nav.filters.interface import GATE
+
 OUTLIER_GATE = 6.0
 """Default innovation gate of the navigation-grade filters, standard deviations."""
 OUTLIER_GATE_LIMIT = 5
@@ -30,6 +32,11 @@ class InnovationGated:
     outlier_gate: float
     outlier_gate_limit: int
     gated: int
+
+    @property
+    def capabilities(self) -> frozenset[str]:
+        """The filter's, and :data:`~gpf_nav.filters.interface.GATE`."""
+        return super().capabilities | {GATE}
 
     def _init_gate(self, outlier_gate: float, outlier_gate_limit: int) -> None:
         """Set the gate; ValueError when either option is negative."""

@@ -5,6 +5,10 @@ the update uses only the measured rows. That is how partial observability reache
 ``update(y, sensor)`` conditions on the measurement of any :class:`~gpf_nav.sensors.sensor.Sensor` of the
 user's state; without one, on the model's own (:class:`~gpf_nav.sensors.model.ModelSensor`).
 
+Optional capabilities are declared, not probed: :attr:`Filter.capabilities` names those a filter has
+(:data:`CAPABILITIES`), and the attributes of every capability are declared on :class:`Filter` with the
+value they read when the capability is absent (None, 0, False or empty).
+
 Time: :attr:`Filter.time` is the elapsed time since ``initialize(mean, cov, t0)`` (``t0 + `` the sum of
 the ``dt`` predicted over); it is the ``t`` the filter passes to the model.
 """
@@ -21,6 +25,32 @@ from gpf_nav.models.checks import validate_model
 from gpf_nav.sensors.sensor import Padded, Sensor
 from gpf_nav.sensors.model import ModelSensor
 
+
+CLOUD = "cloud"
+"""``particles`` ``(N, n)`` and ``weights`` ``(N,)`` (None: equal weights, an ensemble)."""
+RESAMPLING = "resampling"
+"""``ess`` (ESS/N after the last update), ``resampled`` (at the last update), ``resample_count``."""
+COSTATE = "costate"
+"""The geometric co-state of the last update: ``costate_mean`` ``(m,)``, ``costate_measured`` ``(m,)``
+bool (the components it covers), ``costate_norm_mean``, ``costate_norm_max``."""
+GATE = "gate"
+"""An innovation gate: ``gated`` counts the measurement components it refused."""
+TEMPERING = "tempering"
+"""Likelihood tempering: ``tempered_updates`` counts the updates split into stages."""
+MODEL_PROBABILITIES = "model_probabilities"
+"""``model_probabilities`` ``(2,)``: of the nominal and the compensated model."""
+COMPENSATION = "compensation"
+"""An estimated unmodelled acceleration: ``unmodelled_acceleration`` ``(p,)`` and its covariance
+``unmodelled_acceleration_covariance`` ``(p, p)``."""
+SENSOR_BIAS = "sensor_bias"
+"""Sensor-bias states: ``sensor_names`` (the biased sensors) and ``sensor_bias(name)``."""
+CAPABILITIES = (CLOUD, RESAMPLING, COSTATE, GATE, TEMPERING, MODEL_PROBABILITIES, COMPENSATION, SENSOR_BIAS)
+"""Every optional capability a filter may declare in :attr:`Filter.capabilities`."""
+
+_EMPTY_VECTOR = np.zeros(0)
+_EMPTY_VECTOR.flags.writeable = False
+_EMPTY_MATRIX = np.zeros((0, 0))
+_EMPTY_MATRIX.flags.writeable = False
 
 COVARIANCE_LIMIT = 1e300
 """A covariance whose trace reaches this counts as unhealthy: inflated by a recovery, or estimated from
@@ -39,7 +69,52 @@ class Filter(ABC):
     Attributes:
         recoveries: how many times the filter re-initialised itself (see :meth:`_recover`).
         last_recovery_reason: why it last did, or None.
+
+    The attributes of the optional capabilities (:data:`CAPABILITIES`) follow; a filter that has one names
+    it in :attr:`capabilities` and overrides them, the others read the absent value given here.
     """
+
+    # --- optional capabilities: their attributes, as they read when absent ------------------------------
+    particles: np.ndarray | None = None
+    """``(N, n)`` particles or ensemble members (:data:`CLOUD`)."""
+    weights: np.ndarray | None = None
+    """``(N,)`` normalised weights of :attr:`particles` (:data:`CLOUD`; None: equal)."""
+    ess: float | None = None
+    """ESS/N after the last update (:data:`RESAMPLING`)."""
+    resampled: bool = False
+    """Whether the last update resampled (:data:`RESAMPLING`)."""
+    resample_count: int = 0
+    """Resamplings so far (:data:`RESAMPLING`)."""
+    costate_mean: np.ndarray | None = None
+    """Weighted mean co-state ``(m,)`` of the last update (:data:`COSTATE`)."""
+    costate_measured: np.ndarray | None = None
+    """Components ``(m,)`` bool the last co-state covers (:data:`COSTATE`)."""
+    costate_norm_mean: float | None = None
+    """Weighted mean of the per-particle co-state norms (:data:`COSTATE`)."""
+    costate_norm_max: float | None = None
+    """Largest per-particle co-state norm (:data:`COSTATE`)."""
+    gated: int = 0
+    """Measurement components refused by the innovation gate (:data:`GATE`)."""
+    tempered_updates: int = 0
+    """Updates split into tempering stages (:data:`TEMPERING`)."""
+    model_probabilities: np.ndarray | None = None
+    """``(2,)`` probabilities of the nominal and the compensated model (:data:`MODEL_PROBABILITIES`)."""
+    unmodelled_acceleration: np.ndarray = _EMPTY_VECTOR
+    """Estimated unmodelled acceleration ``(p,)`` (:data:`COMPENSATION`; empty without)."""
+    unmodelled_acceleration_covariance: np.ndarray = _EMPTY_MATRIX
+    """Its covariance ``(p, p)`` (:data:`COMPENSATION`)."""
+    sensor_names: tuple[str, ...] = ()
+    """Sensors whose bias the filter estimates (:data:`SENSOR_BIAS`)."""
+
+    @property
+    def capabilities(self) -> frozenset[str]:
+        """The optional capabilities (:data:`CAPABILITIES`) this filter has; none for the base class."""
+        return frozenset()
+
+    def sensor_bias(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(estimated bias (m,), its std (m,))`` of sensor ``name`` (:data:`SENSOR_BIAS`); KeyError when
+        the filter estimates no bias of ``name``."""
+        raise KeyError(f"{type(self).__name__} estimates no bias of sensor {name!r}")
 
     def __init__(self, model: StateSpaceModel, seed: int | np.random.Generator | None = None):
         self.model = model

@@ -38,6 +38,8 @@ import math
 import numpy as np
 
 from gpf_nav.filters.gpf import GeometricProjectionPF
+from gpf_nav.filters.interface import (CLOUD, COMPENSATION, COSTATE, GATE, MODEL_PROBABILITIES, RESAMPLING,
+                                       TEMPERING, Filter)
 from gpf_nav.filters.model_averaging import mixture_moments
 from gpf_nav.linalg import positive_definite
 from gpf_nav.models.state_space import StateSpaceModel
@@ -46,8 +48,12 @@ SWITCH_TIME = 2.0e5
 """Default mean sojourn time of the model chain, s (switching probability 1e-5 per 2 s step)."""
 
 
-class MultipleModelGPF:
+class MultipleModelGPF(Filter):
     """IMM over a nominal and a compensated :class:`GeometricProjectionPF` (module docstring).
+
+    A :class:`~gpf_nav.filters.interface.Filter` whose state lives in its members: it keeps no cloud of
+    its own, so it does not run the base class's initialisation, and it answers every capability of
+    the interface from them (the estimate and the particle diagnostics model-averaged).
 
     Args:
         model: the user's state-space model.
@@ -87,6 +93,12 @@ class MultipleModelGPF:
     @property
     def members(self) -> tuple[GeometricProjectionPF, GeometricProjectionPF]:
         return self.nominal, self.compensated
+
+    @property
+    def capabilities(self) -> frozenset[str]:
+        """Its members' (a cloud, resampling, a co-state, a gate, tempering, the compensation) and the
+        model probabilities."""
+        return frozenset({CLOUD, RESAMPLING, COSTATE, GATE, TEMPERING, MODEL_PROBABILITIES, COMPENSATION})
 
     # --- the filter interface ------------------------------------------------------------------------
     def initialize(self, mean, cov, t0: float = 0.0) -> None:

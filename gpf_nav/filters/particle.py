@@ -25,7 +25,7 @@ import math
 import numpy as np
 
 from gpf_nav import resampling as resamplers
-from gpf_nav.filters.interface import Filter
+from gpf_nav.filters.interface import CLOUD, COSTATE, RESAMPLING, TEMPERING, Filter
 from gpf_nav.filters.kernel import match_moments, weighted_moments
 from gpf_nav.filters.projection import project
 from gpf_nav.linalg import cholesky_or_none, positive_definite, psd_sqrt
@@ -125,6 +125,11 @@ class ParticleFilter(Filter):
         self._collapsed_for = 0
         self._remember(mean, cov)
         self.initialized = True
+
+    @property
+    def capabilities(self) -> frozenset[str]:
+        """A particle cloud with weights and resampling, a co-state and tempering."""
+        return frozenset({CLOUD, RESAMPLING, COSTATE, TEMPERING})
 
     @property
     def particles(self) -> np.ndarray:
@@ -551,6 +556,11 @@ class BootstrapPF(ParticleFilter):
                          observability_constraint=observability_constraint)
         self.compute_costate = bool(compute_costate)
         self.regularization = float(regularization)
+
+    @property
+    def capabilities(self) -> frozenset[str]:
+        """:class:`ParticleFilter`'s, without the co-state unless ``compute_costate``."""
+        return super().capabilities - (set() if self.compute_costate else {COSTATE})
 
     def _propose(self, x_pred, y, rows, dt, inverse_factor, z):
         a = None

@@ -172,7 +172,7 @@ def stream_values(engine) -> list[tuple[str, str]]:
                    ("history inputs", str(len(history))), ("history span [s]", _fmt(span)),
                    ("history snapshot failures", str(engine.snapshot_failures))]
     f = engine.filter
-    for name in getattr(f, "sensor_names", ()) if engine.initialized else ():
+    for name in f.sensor_names if engine.initialized else ():
         mean, std = f.sensor_bias(name)
         values += [(f"bias {name}", _vector(mean)), (f"bias std {name}", _vector(std))]
     return values
