@@ -4,7 +4,8 @@
 Each parameter is one :class:`gpf_nav.schema.Spec`: the node declares the table
 (:func:`gpf_nav.ros.parameters.declare`), :func:`check_estimator_parameters` validates it,
 ``gpf-nav parameters`` writes ``config/estimator.yaml`` and ``docs/parameters.md`` from it, and the launch
-file takes its choices from it. The filter's options are checked by ``make_filter`` for the chosen filter.
+file takes its choices from it. The measurement streams bring their own parameters
+(:func:`gpf_nav.estimator.streams.stream_parameters`). The filter's options are checked by ``make_filter`` for the chosen filter.
 No parameter may be changed at run time except those marked ``live``. No ROS here.
 """
 from __future__ import annotations
@@ -15,6 +16,7 @@ from dataclasses import replace
 
 from gpf_nav import resampling
 from gpf_nav.estimator.factory import FILTERS
+from gpf_nav.estimator.streams import STREAMS, stream_parameters
 from gpf_nav.filters.gpf import METRICS, REFERENCES, WEIGHTINGS
 from gpf_nav.models.lunar import MU_MOON
 from gpf_nav.schema import ParameterError, Spec, check, coerce
@@ -85,23 +87,10 @@ ESTIMATOR = [
         Spec("quaternion_tolerance", 0.01, "Allowed | |q| - 1 | of an IMU orientation.", bounds="> 0"),
     ),
     *_group(
-        "Sensors, late measurements, biases",
+        "Measurement streams (gpf_nav.estimator.streams), late measurements",
         Spec("history_length", 10.0, "A measurement stamped up to this long before the filter's time is fused at its stamp (the later inputs are re-applied); older ones are refused; 0: none.", "s", ">= 0"),
-        Spec("altitude_frame", "base_link", "Required header.frame_id of measurements/altitude ('' = any)."),
-        Spec("altitude_noise_std", 20.0, "Altitude (measurements/altitude) noise standard deviation.", "m", "> 0"),
-        Spec("reference_radius", 1737.4e3, "Radius of the sphere measurements/altitude is measured above (the Moon's mean radius).", "m", ">= 0"),
-        Spec("position_gate", 0.9999, "Innovation gate of measurements/position: chi-square probability (3 dof); 0: no gate.", bounds="[0, 1)"),
-        Spec("velocity_gate", 0.9999, "Innovation gate of measurements/velocity: chi-square probability (3 dof); 0: no gate.", bounds="[0, 1)"),
-        Spec("altitude_gate", 0.9999, "Innovation gate of measurements/altitude: chi-square probability (1 dof); 0: no gate.", bounds="[0, 1)"),
+        *stream_parameters(STREAMS),
         Spec("gate_limit", 5, "After this many refusals of a gate in a row the next measurement of that stream is used.", bounds=">= 0"),
-        Spec("range_bias_std", 0.0, "Estimate a range bias (rae and range) of this prior std; 0: none.", "m", ">= 0"),
-        Spec("range_bias_time", 0.0, "Correlation time of the range bias (first-order Gauss-Markov); 0: a random constant.", "s", ">= 0"),
-        Spec("position_bias_std", 0.0, "Estimate a bias per axis of measurements/position of this prior std; 0: none.", "m", ">= 0"),
-        Spec("position_bias_time", 0.0, "Correlation time of the position bias; 0: a random constant.", "s", ">= 0"),
-        Spec("velocity_bias_std", 0.0, "Estimate a bias per axis of measurements/velocity of this prior std; 0: none.", "m/s", ">= 0"),
-        Spec("velocity_bias_time", 0.0, "Correlation time of the velocity bias; 0: a random constant.", "s", ">= 0"),
-        Spec("altitude_bias_std", 0.0, "Estimate a bias of measurements/altitude of this prior std; 0: none.", "m", ">= 0"),
-        Spec("altitude_bias_time", 0.0, "Correlation time of the altitude bias; 0: a random constant.", "s", ">= 0"),
     ),
     *_group(
         "Outputs and diagnostics",

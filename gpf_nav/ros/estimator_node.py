@@ -48,7 +48,7 @@ from gpf_nav.estimator.factory import FILTERS
 from gpf_nav.estimator.params import ESTIMATOR, ParameterError
 from gpf_nav.ros import conversions as conv
 from gpf_nav.ros import shutdown
-from gpf_nav.ros.message_layer import INPUT_TOPICS, OUTPUT_TOPICS, MessageLayer
+from gpf_nav.ros.message_layer import OUTPUT_TOPICS, MessageLayer
 from gpf_nav.ros.parameters import declare, params_files, warn_undeclared, warn_unmatched_params_files
 
 try:
@@ -180,7 +180,7 @@ class EstimatorNode(LifecycleNode):
         self._entities = [(self.destroy_subscription,
                            self.create_subscription(msg_type, topic, self._callback(stream),
                                                     qos.get(stream, sensor_qos)))
-                          for topic, (stream, msg_type) in INPUT_TOPICS.items()]
+                          for topic, (stream, msg_type) in self.core.inputs.items()]
         self._entities.append((self.destroy_service, self.create_service(Trigger, "~/reset", self._on_reset)))
         if p["publish_rate"] > 0:
             self._entities.append((self.destroy_timer,

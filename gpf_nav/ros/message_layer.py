@@ -9,8 +9,11 @@ and hands every output message to a ``publish(topic, msg)`` callable. The node c
 * ``gpf-nav replay`` (:mod:`gpf_nav.bags.replay`): messages from a rosbag2 bag, the node clock being each
   message's recording time.
 
-So both apply the same parameters, checks, counters and outputs. Topic names are the node's
-(relative: resolved in the node's namespace), in :data:`INPUT_TOPICS` and :data:`OUTPUT_TOPICS`.
+So both apply the same parameters, checks, counters and outputs. Every measurement stream of
+:data:`gpf_nav.estimator.streams.STREAMS` takes one path: header (stamp, frame), the conversion of its
+message type (:mod:`gpf_nav.ros.stream_messages`), the stream's checks, its sensor. Topic names are the
+node's (relative: resolved in the node's namespace), in :attr:`MessageLayer.inputs` (for the shipped
+streams :data:`INPUT_TOPICS`) and :data:`OUTPUT_TOPICS`.
 """
 from __future__ import annotations
 
@@ -20,9 +23,9 @@ from typing import Callable
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped, TwistWithCovarianceStamped, Vector3Stamped
+from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
-from sensor_msgs.msg import Imu, Range
+from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64
 
 from gpf_nav.ros import conversions as conv
@@ -32,15 +35,25 @@ from gpf_nav.estimator.engine import EngineConfig, EstimatorEngine
 from gpf_nav.estimator.factory import make_filter, make_lunar_model
 from gpf_nav.estimator.params import ParameterError, check_estimator_parameters, filter_options
 from gpf_nav.estimator.sensor_setup import build_sensors, gates, with_biases
+from gpf_nav.estimator.streams import STREAMS, Stream
+from gpf_nav.filters.interface import CLOUD
+from gpf_nav.ros.stream_messages import MESSAGE_TYPES
 
 LOG_THROTTLE = 5.0  # s (wall clock) between two log lines about the same refusal reason
 
-INPUT_TOPICS = {"measurements/rae": ("rae", Vector3Stamped), "measurements/range": ("range", Range),
-                "measurements/position": ("position", PoseWithCovarianceStamped),
-                "measurements/velocity": ("velocity", TwistWithCovarianceStamped),
-                "measurements/altitude": ("altitude", Range), "imu": ("imu", Imu), "set_pose": ("set_pose", PoseWithCovarianceStamped),
-                "set_state": ("set_state", Odometry)}
-"""topic -> (stream name used in the counters, message type)."""
+CONTROL_TOPICS = {"imu": ("imu", Imu), "set_pose": ("set_pose", PoseWithCovarianceStamped),
+                  "set_state": ("set_state", Odometry)}
+"""topic -> (name used in the counters, message type) of the inputs that are not measurements."""
+
+
+def input_topics(streams: list[Stream]) -> dict[str, tuple[str, type]]:
+    """topic -> (stream name used in the counters, message type): the measurement streams, then
+    :data:`CONTROL_TOPICS`."""
+    return {**{s.topic: (s.name, MESSAGE_TYPES[s.message].cls) for s in streams}, **CONTROL_TOPICS}
+
+
+INPUT_TOPICS = input_topics(STREAMS)
+"""The inputs of the shipped stream table (:data:`gpf_nav.estimator.streams.STREAMS`)."""
 
 OUTPUT_TOPICS = {"odometry/filtered": Odometry, "gpf/ess": Float64, "gpf/costate": Vector3Stamped,
                  "gpf/unmodelled_acceleration": Vector3Stamped, "gpf/particles": PoseArray,
@@ -73,6 +86,8 @@ class MessageLayer:
                  monotonic: Callable[[], float] = time.monotonic,
                  wants_particles: Callable[[], bool] = lambda: False):
         p = self.params = params
+        self.streams = {s.name: s for s in STREAMS}
+        self.inputs = input_topics(STREAMS)
         errors = check_estimator_parameters(p)
         if errors:
             raise ParameterError("invalid parameters: " + "; ".join(errors))
@@ -82,7 +97,7 @@ class MessageLayer:
                                           angle_noise_std=p["angle_noise_std"],
                                           accel_noise_density=p["accel_noise_density"],
                                           max_step=p["max_step"])
-            self.sensors = build_sensors(p, self.model)
+            self.sensors = build_sensors(p, self.model, STREAMS)
             factory = with_biases(lambda m: make_filter(p["filter"], m, **filter_options(p)), self.model,
                                   self.sensors)
             factory()
@@ -95,7 +110,7 @@ class MessageLayer:
             initial_std=np.array(p["initial_std"]), initial_stamp=p["initial_stamp"],
             max_measurement_rate=p["max_measurement_rate"], max_extrapolation=p["max_extrapolation"],
             reinit_hold=p["reinit_hold"], monitor=monitor_options(p), monitor_hold=p["monitor_hold"],
-            history_length=p["history_length"], gates=gates(p), gate_limit=p["gate_limit"])
+            history_length=p["history_length"], gates=gates(p, STREAMS), gate_limit=p["gate_limit"])
         self.engine = EstimatorEngine(factory, self.model, config, monotonic=monotonic)
         self.thresholds = diag.Thresholds(ess_warn=p["ess_warn_threshold"],
                                           costate_warn=p["costate_warn_threshold"],
@@ -103,10 +118,7 @@ class MessageLayer:
         self.publish = publish
         self.logger = logger
         self.wants_particles = wants_particles
-        self._handlers = {"rae": self._on_rae, "range": self._on_range, "imu": self._on_imu,
-                          "position": self._on_position, "velocity": self._on_velocity,
-                          "altitude": self._on_altitude,
-                          "set_pose": self._on_set_pose, "set_state": self._on_set_state}
+        self._handlers = {"imu": self._on_imu, "set_pose": self._on_set_pose, "set_state": self._on_set_state}
         self._last_log: dict[str, float] = {}
         self._integrity_level = "OK"
         self._last_published_ns: int | None = None
@@ -122,11 +134,14 @@ class MessageLayer:
 
     # --- inputs ----------------------------------------------------------------------------------------
     def handle(self, stream: str, msg, now_ns: int) -> None:
-        """Process one message of ``stream`` (a value of :data:`INPUT_TOPICS`)
+        """Process one message of ``stream`` (a name of :attr:`inputs`)
         received at node time ``now_ns``. An unexpected exception is counted (``internal_error``) and
         logged, never raised."""
         try:
-            self._handlers[stream](msg, now_ns)
+            if stream in self.streams:
+                self._on_measurement(self.streams[stream], msg, now_ns)
+            else:
+                self._handlers[stream](msg, now_ns)
         except Exception as err:  # noqa: BLE001 - the last-resort net: the estimator goes on
             self._refuse(stream, "internal_error", f"{type(err).__name__}: {err}")
 
@@ -168,54 +183,21 @@ class MessageLayer:
         return (f"stamp {stamp_ns * 1e-9:.3f} s, last processed "
                 f"{'none' if last is None else f'{last * 1e-9:.3f} s'}, node clock {now_ns * 1e-9:.3f} s")
 
-    def _on_rae(self, msg: Vector3Stamped, now_ns: int) -> None:
-        stamp = self._check_header("rae", msg.header, self.params["measurement_frame"])
+    def _on_measurement(self, stream: Stream, msg, now_ns: int) -> None:
+        """A message of a measurement stream: header, conversion, the stream's checks, its sensor."""
+        stamp = self._check_header(stream.name, msg.header, self.params[stream.frame])
         if stamp is None:
             return
-        ok, reason, values = val.check_rae(*conv.rae_values(msg))
+        reading = MESSAGE_TYPES[stream.message].reading(msg)
+        ok, reason = stream.check(reading)
         if not ok:
-            self._refuse("rae", reason, f"(range, azimuth, elevation) = {values}")
+            self._refuse(stream.name, reason, reading.describe())
             return
-        self._measurement("rae", stamp, np.array(values), now_ns)
-
-    def _on_range(self, msg: Range, now_ns: int) -> None:
-        stamp = self._check_header("range", msg.header, self.params["measurement_frame"])
-        if stamp is None:
-            return
-        ok, reason = val.check_range(msg.range, msg.min_range, msg.max_range)
-        if not ok:
-            self._refuse("range", reason, f"range {msg.range} with limits [{msg.min_range}, {msg.max_range}]")
-            return
-        self._measurement("range", stamp, np.array([float(msg.range), np.nan, np.nan]), now_ns)
-
-    def _on_position(self, msg: PoseWithCovarianceStamped, now_ns: int) -> None:
-        self._fix("position", msg.header, *conv.position_fix(msg), now_ns)
-
-    def _on_velocity(self, msg: TwistWithCovarianceStamped, now_ns: int) -> None:
-        self._fix("velocity", msg.header, *conv.velocity_fix(msg), now_ns)
-
-    def _fix(self, stream: str, header, y: np.ndarray, cov: np.ndarray, now_ns: int) -> None:
-        """A position or velocity fix in ``world_frame``; its noise is the message's covariance block."""
-        stamp = self._check_header(stream, header, self.params["world_frame"])
-        if stamp is None:
-            return
-        ok, reason = val.check_finite(*y)
-        if ok:
-            ok, reason = val.check_covariance(cov)
-        if not ok:
-            self._refuse(stream, reason, f"value {y.tolist()}, covariance {cov.reshape(-1).tolist()}")
-            return
-        self._measurement(stream, stamp, y, now_ns, self.sensors[stream].with_noise(cov))
-
-    def _on_altitude(self, msg: Range, now_ns: int) -> None:
-        stamp = self._check_header("altitude", msg.header, self.params["altitude_frame"])
-        if stamp is None:
-            return
-        ok, reason = val.check_range(msg.range, msg.min_range, msg.max_range)
-        if not ok:
-            self._refuse("altitude", reason, f"altitude {msg.range} with limits [{msg.min_range}, {msg.max_range}]")
-            return
-        self._measurement("altitude", stamp, np.array([float(msg.range)]), now_ns, self.sensors["altitude"])
+        sensor = self.sensors[stream.name]
+        y = stream.measurement(reading, sensor.dim)
+        if stream.noise_from_message:
+            sensor = sensor.with_noise(reading.covariance)
+        self._measurement(stream.name, stamp, y, now_ns, None if stream.model_measurement else sensor)
 
     def _measurement(self, stream: str, stamp: int, y: np.ndarray, now_ns: int, sensor=None) -> None:
         ok, reason = self.engine.measurement(stamp, y, now_ns, stream, sensor)
@@ -333,9 +315,9 @@ class MessageLayer:
                 self.publish("gpf/costate",
                              conv.vector3_stamped(lam, stamp, p["measurement_frame"] or p["world_frame"]))
         k = p["max_published_particles"]
-        if k > 0 and hasattr(f, "particles") and self.wants_particles():
+        if k > 0 and CLOUD in f.capabilities and self.wants_particles():
             particles = np.asarray(f.particles)
-            weights = getattr(f, "weights", None)
+            weights = f.weights
             if weights is None:
                 weights = np.full(particles.shape[0], 1.0 / particles.shape[0])
             chosen = particles[conv.decimate(particles, np.asarray(weights), k)][:, list(self.model.position_index)]
