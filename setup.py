@@ -29,7 +29,7 @@ setup(
         ("share/" + PACKAGE + "/launch", glob("launch/*.py")),
     ],
     python_requires=">=3.10",
-    install_requires=["setuptools", "numpy", "scipy", "threadpoolctl"],
+    install_requires=["setuptools", "numpy", "scipy", "threadpoolctl", "numba"],
     extras_require={
         # ROS 2 Jazzy Python client from PyPI, for machines without a system ROS installation; rosbags
         # (pure Python rosbag2 reader/writer) for gpf-nav record / replay.

@@ -1,7 +1,8 @@
 """Resampling schemes: normalised weights ``(N,)`` in, ancestor indices ``(N,)`` out.
 
 All four schemes share one signature ``scheme(weights, rng) -> ancestors`` and are O(N) or
-O(N log N) in vectorised numpy. Cumulative weights have their last entry forced to exactly 1 so
+O(N log N): systematic resampling is a compiled kernel (:mod:`gpf_nav.kernels.systematic`), the others
+vectorised numpy. Cumulative weights have their last entry forced to exactly 1 so
 round-off can never produce an out-of-range ancestor.
 """
 from __future__ import annotations
@@ -9,6 +10,8 @@ from __future__ import annotations
 from typing import Callable
 
 import numpy as np
+
+from gpf_nav.kernels.systematic import systematic_ancestors
 
 Resampler = Callable[[np.ndarray, np.random.Generator], np.ndarray]
 
@@ -26,10 +29,7 @@ def _from_counts(counts: np.ndarray) -> np.ndarray:
 
 def systematic(weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """Systematic resampling: one uniform ``U``, points ``(U + j) / N``; offspring counted in O(N)."""
-    n = weights.size
-    edges = np.ceil(n * _cumulative(weights) - rng.random())
-    counts = np.diff(np.clip(edges, 0, n), prepend=0.0).astype(np.intp)
-    return _from_counts(counts)
+    return systematic_ancestors(np.ascontiguousarray(weights, dtype=float), rng.random())
 
 
 def stratified(weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:

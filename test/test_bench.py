@@ -6,15 +6,16 @@ import numpy as np
 import pytest
 
 from gpf_nav import allocator, cli
-from gpf_nav.experiments import bench
+from gpf_nav.experiments import bench, peer_particles
 
 
 def test_bench_reports_every_filter_and_the_ratio_of_the_same_run(capsys):
     assert cli.main(["bench", "--json", "--particles", "200", "--repeats", "1"]) == 0
     report = json.loads(capsys.readouterr().out)
     names = [(r["filter"], r["particles"]) for r in report["results"]]
-    assert names == [("gpf", 200), ("gpf-paper", 200), ("gpf-single", 200), ("spf", 200), ("ekf", None), ("ukf", None),
-                     ("enkf", 500)]
+    peer = [("particles", 200)] if peer_particles.available() else []  # the peer row when installed
+    assert names == [("gpf", 200), ("gpf-paper", 200), ("gpf-single", 200), ("spf", 200), *peer, ("ekf", None),
+                     ("ukf", None), ("enkf", 500)]
     times = {name: r["us_per_step"] for name, r in zip(names, report["results"])}
     blocks = {name: np.array(r["blocks_us"]) for name, r in zip(names, report["results"])}
     assert all(np.isfinite(t) and t > 0 for t in times.values())
@@ -24,6 +25,11 @@ def test_bench_reports_every_filter_and_the_ratio_of_the_same_run(capsys):
         np.median(blocks[("gpf", 200)] / blocks[("spf", 200)]))
     assert report["gpf_over_paper_gpf"]["200"] == pytest.approx(
         np.median(blocks[("gpf", 200)] / blocks[("gpf-paper", 200)]))
+    if peer:
+        assert report["gpf_over_particles"]["200"] == pytest.approx(
+            np.median(blocks[("gpf", 200)] / blocks[("particles", 200)]))
+    else:
+        assert report["gpf_over_particles"] == {}
     expected = "retain_freed_memory" if allocator.retained else "default"
     assert report["machine"]["allocator"] == expected
     text = bench.format_table(report)
@@ -93,3 +99,21 @@ def test_filters_of_a_group_are_timed_in_turn_each_on_its_own_measurements_in_or
     for round_ in range(3):
         starts = [log[bench.WARMUP + 4 * round_][0] for log in logs]
         assert int(np.argmin(starts)) == round_
+
+
+@pytest.mark.skipif(not peer_particles.available(), reason="particles is not installed")
+def test_particles_bootstrap_tracks_the_descent():
+    """The peer row runs a real filter: ``particles``' bootstrap filter on our lunar model stays within a
+    few kilometres of the truth over 20 steps (the prior's spread is 1 km)."""
+    from dataclasses import replace
+
+    from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
+
+    config = replace(ScenarioConfig(), duration=2.0 * 21)
+    scenario, model = generate(config, 0), filter_model(config)
+    f = peer_particles.ParticlesBootstrap(model, 2000, seed=1)
+    f.initialize(scenario.prior_mean, scenario.prior_cov)
+    for k in range(20):
+        f.predict(config.dt)
+        f.update(scenario.measurements[k])
+    assert np.linalg.norm(f.mean[:3] - scenario.truth[20, :3]) < 3e3

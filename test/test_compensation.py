@@ -179,7 +179,7 @@ def test_lunar_frame_is_radial_along_track_cross_track():
     assert np.all(np.einsum("ni,ni->n", frame[:50, :, 1], v) > 0)  # along-track: the way the orbit goes
     assert np.allclose(np.einsum("ni,ni->n", frame[:50, :, 2], v), 0.0, atol=1e-9)
     np.testing.assert_allclose(frame[-1], np.eye(3))  # a non-finite state: the world's axes
-    # one state at a time (the Python-float path, and its fall-back to the array path): the same frames
+    # one state at a time: the same frames
     single = np.concatenate([LunarDescentModel().compensation_frame(state[None]) for state in x])
     np.testing.assert_allclose(single, frame, rtol=0, atol=1e-15)
 

@@ -3,14 +3,16 @@
 The filters are :mod:`gpf_nav.registry` entries, by name (default :data:`FILTERS`): ``gpf`` is the
 default (navigation-grade) configuration, the multiple-model GPF (two GPFs of N particles each),
 ``gpf-paper`` the paper's, ``gpf-single`` one navigation-grade GPF of N particles on the compensated model
-(the default before the multiple model), ``spf`` the bootstrap PF without its diagnostic co-state.
+(the default before the multiple model), ``spf`` the bootstrap PF without its diagnostic co-state, and
+``particles`` N. Chopin's bootstrap filter on the same model when that library is installed
+(:mod:`gpf_nav.experiments.peer_particles`; skipped otherwise).
 Each filter runs on the same seeded lunar-descent measurements, each step on the next measurement. A step
 is timed over a block of steps. The filters of one group (the particle filters of one N; the Gaussian
 filters and the EnKF) run their blocks in turn, round after round, the order rotating each round, so a
 machine whose speed drifts (other work, CPU frequency) moves every filter of the group alike. The
 reported figure is a filter's median block time per step over ``--repeats`` rounds, after a warm-up; the
-GPF/SPF and GPF/GPF-paper ratios are the medians over the rounds of the ratio of the two blocks of a
-round. ``gpf-nav bench`` runs with the heap tuning of :mod:`gpf_nav.allocator` (the report says whether
+GPF/SPF, GPF/GPF-paper and GPF/particles ratios are the medians over the rounds of the ratio of the two
+blocks of a round. ``gpf-nav bench`` runs with the heap tuning of :mod:`gpf_nav.allocator` (the report says whether
 it was applied); ``python -m gpf_nav.experiments.bench`` runs with the C library's default allocator, for
 comparison. ``--node`` runs the ROS node-latency benchmark instead (``gpf_nav.tools.latency``).
 """
@@ -25,35 +27,51 @@ import numpy as np
 
 from gpf_nav import allocator, registry
 from gpf_nav.arguments import CommandParser, positive_int
+from gpf_nav.experiments import peer_particles
+from gpf_nav.experiments.peer_particles import ParticlesBootstrap
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 
 PARTICLE_COUNTS = (500, 10_000, 100_000)
-FILTERS = ("gpf", "gpf-paper", "gpf-single", "spf", "ekf", "ukf", "enkf")
-"""The filters timed by default (registry names), in table order."""
+LARGE = 1_000_000
+"""The particle count ``--large`` adds."""
+PEER = "particles"
+"""The peer library's bootstrap filter, timed with the particle filters (not a registry entry)."""
+FILTERS = ("gpf", "gpf-paper", "gpf-single", "spf", PEER, "ekf", "ukf", "enkf")
+"""The filters timed by default (registry names and :data:`PEER`), in table order."""
 ENSEMBLE_SIZE = 500
 """Members of an ensemble filter (the particle counts apply to the particle filters only)."""
 
 
 def _maker(name: str, n: int | None):
-    """``constructor(model, seed)`` of registry filter ``name`` with ``n`` particles or members."""
+    """``constructor(model, seed)`` of registry filter ``name`` (or :data:`PEER`) with ``n`` particles or
+    members."""
+    if name == PEER:
+        return lambda model, seed: ParticlesBootstrap(model, n, seed)
     return lambda model, seed: registry.make(name, model, n, seed)
+
+
+def _particle_filter(name: str) -> bool:
+    return name == PEER or registry.lookup(name).particles
 
 
 def _groups(particle_counts, filters=FILTERS) -> list[list[tuple[str, int | None, object]]]:
     """Groups timed together, each a list of ``(filter name, N or None, constructor(model, seed))`` in table
-    order: the particle filters of each N, then the others (Gaussian and ensemble filters)."""
-    entries = [registry.lookup(name) for name in filters]
-    groups = [[(e.name, n, _maker(e.name, n)) for e in entries if e.particles] for n in particle_counts]
+    order: the particle filters of each N (:data:`PEER` among them when installed), then the others
+    (Gaussian and ensemble filters)."""
+    names = [name for name in filters if name != PEER or peer_particles.available()]
+    groups = [[(name, n, _maker(name, n)) for name in names if _particle_filter(name)] for n in particle_counts]
+    entries = [registry.lookup(name) for name in names if not _particle_filter(name)]
     others = [(e.name, None if e.min_particles is None else ENSEMBLE_SIZE,
                _maker(e.name, None if e.min_particles is None else ENSEMBLE_SIZE))
-              for e in entries if not e.particles]
+              for e in entries]
     return [group for group in (*groups, others) if group]
 
 
 WARMUP = 3
 """Untimed steps before the first block."""
 STEPS = 50
-"""Steps per timed block (5 above N = 10 000)."""
+"""Steps per timed block (5 above N = 10 000, :data:`LARGE_STEPS` from :data:`LARGE`)."""
+LARGE_STEPS = 2
 
 
 def time_filters(makers, scenario, model, steps: int, repeats: int,
@@ -94,26 +112,26 @@ def time_filter(make, scenario, model, steps: int, repeats: int, warmup: int = W
 def run(particle_counts=PARTICLE_COUNTS, repeats: int = 15, seed: int = 0, filters=FILTERS) -> dict:
     """Benchmark ``filters`` (registry names); returns ``{"results": [{"filter", "particles", "us_per_step", "blocks_us"
     (per round)}, ...], "gpf_over_spf": {N: ratio},
-    "gpf_over_paper_gpf": {N: ratio}, "machine": ...}`` (module docstring)."""
+    "gpf_over_paper_gpf": {N: ratio}, "gpf_over_particles": {N: ratio} (empty without ``particles``),
+    "machine": ...}`` (module docstring)."""
     default = ScenarioConfig()
     config = replace(default, duration=default.dt * (WARMUP + repeats * STEPS + 1))
     scenario = generate(config, seed)
     model = filter_model(config)
-    results, ratios, paper = [], {}, {}
+    results, ratios, paper, peer = [], {}, {}, {}
     for group in _groups(particle_counts, filters):
         n = max(count or 0 for _, count, _ in group)
-        steps = STEPS if n <= 10_000 else 5
+        steps = STEPS if n <= 10_000 else 5 if n < LARGE else LARGE_STEPS
         blocks = time_filters([make for _, _, make in group], scenario, model, steps, repeats)
         for (name, count, _), times in zip(group, blocks):
             results.append({"filter": name, "particles": count, "us_per_step": float(np.median(times)) * 1e6,
                             "blocks_us": [t * 1e6 for t in times]})
         by_name = {name: np.asarray(times) for (name, _, _), times in zip(group, blocks)}
-        if registry.lookup(group[0][0]).particles and "gpf" in by_name:
-            if "spf" in by_name:
-                ratios[str(n)] = float(np.median(by_name["gpf"] / by_name["spf"]))
-            if "gpf-paper" in by_name:
-                paper[str(n)] = float(np.median(by_name["gpf"] / by_name["gpf-paper"]))
-    return {"results": results, "gpf_over_spf": ratios, "gpf_over_paper_gpf": paper,
+        if _particle_filter(group[0][0]) and "gpf" in by_name:
+            for other, ratio in (("spf", ratios), ("gpf-paper", paper), (PEER, peer)):
+                if other in by_name:
+                    ratio[str(n)] = float(np.median(by_name["gpf"] / by_name[other]))
+    return {"results": results, "gpf_over_spf": ratios, "gpf_over_paper_gpf": paper, "gpf_over_particles": peer,
             "machine": {"python": platform.python_version(), "numpy": np.__version__,
                         "processor": platform.machine(),
                         "allocator": "retain_freed_memory" if allocator.retained else "default"}}
@@ -131,6 +149,9 @@ def format_table(report: dict) -> str:
     lines.append("GPF/SPF: " + ", ".join(f"N={n}: {v:.2f}" for n, v in report["gpf_over_spf"].items()))
     lines.append("GPF/GPF-paper: " + ", ".join(f"N={n}: {v:.2f}"
                                               for n, v in report["gpf_over_paper_gpf"].items()))
+    if report["gpf_over_particles"]:
+        lines.append("GPF/particles: " + ", ".join(f"N={n}: {v:.2f}"
+                                                  for n, v in report["gpf_over_particles"].items()))
     lines.append(f"allocator: {report['machine']['allocator']}")
     return "\n".join(lines)
 
@@ -141,7 +162,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--particles", type=positive_int, nargs="+", default=list(PARTICLE_COUNTS),
                         help="particle counts for GPF and SPF (default: 500 10000 100000)")
     parser.add_argument("--filters", default=",".join(FILTERS),
-                        help=f"comma-separated registry names (default {','.join(FILTERS)})")
+                        help=f"comma-separated registry names, or {PEER} (default {','.join(FILTERS)})")
+    parser.add_argument("--large", action="store_true",
+                        help=f"also N = {LARGE:,} (blocks of {LARGE_STEPS} steps)".replace(",", " "))
     parser.add_argument("--repeats", type=positive_int, default=15,
                         help="rounds of timed blocks (medians taken; default 15)")
     parser.add_argument("--node", action="store_true",
@@ -153,10 +176,11 @@ def main(argv: list[str] | None = None) -> int:
     if rest:
         parser.error(f"unrecognised arguments: {' '.join(rest)}")
     try:
-        filters = tuple(registry.lookup(name.strip()).name for name in args.filters.split(",") if name.strip())
+        filters = tuple(name.strip() if name.strip() == PEER else registry.lookup(name.strip()).name
+                        for name in args.filters.split(",") if name.strip())
     except ValueError as err:
         parser.error(str(err))
-    report = run(tuple(args.particles), args.repeats, filters=filters)
+    report = run(tuple(args.particles) + ((LARGE,) if args.large else ()), args.repeats, filters=filters)
     print(json.dumps(report, indent=2) if args.json else format_table(report))
     return 0
 

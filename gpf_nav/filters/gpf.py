@@ -43,6 +43,7 @@ from gpf_nav.filters.kernel import default_bandwidth, map_moments, match_moments
 from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
 from gpf_nav.filters.particle import ParticleFilter, gaussian_shift_correction, select_rows
 from gpf_nav.filters.projection import project
+from gpf_nav.kernels import proposal
 from gpf_nav.linalg import cholesky_or_none, triangular_inverse
 from gpf_nav.models.state_space import StateSpaceModel
 
@@ -228,25 +229,17 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         R = cholesky_or_none(M, symmetric=True)  # never None: M >= I, and the check of S bounds G G^T / eps
         U = triangular_inverse(R).T  # (n, n)
         z = antithetic_normals(self.rng, n, self.n_particles)
-        m = B.T @ white_r  # (n, N)
-        w = U @ z
-        w += m
-        pair = np.empty((2 * n, self.n_particles))  # [proposal means; x]: weighed together after the update
-        proposal_means = np.matmul(C, m, out=pair[:n])
-        proposal_means += centres
-        x = np.matmul(C, w, out=pair[n:])
-        x += centres
+        # [proposal means; x] (weighed together after the update) and, with w = m + U z, the exact
+        # weight's log N(x; centre, D) - log q(x) = (|z|^2 - |w|^2) / 2 + log det U (x - centre = C w,
+        # and x - proposal mean = C U z)
+        pair, correction = proposal.draw(centres, C, B.T @ white_r, U, z,
+                                         -sum(map(math.log, R.diagonal().tolist())))
         if self.moment_matching:
             spread = C @ U  # (I - K H) D = C U (C U)^T
             self._proposal = (pair, spread @ spread.T)
+        x = pair[n:]
         if self.weighting == "likelihood":
             return x, 0.0, used
-        # log N(x; centre, D) - log q(x) = (|z|^2 - |w|^2) / 2 + log det U (x - centre = C w, and
-        # x - proposal mean = C U z)
-        correction = np.einsum("kn,kn->n", z, z)
-        correction -= np.einsum("kn,kn->n", w, w)
-        correction *= 0.5
-        correction -= sum(map(math.log, R.diagonal().tolist()))  # log det U
         return x, correction, used
 
     def _whitened(self, H: np.ndarray, r: np.ndarray, rows: np.ndarray, C: np.ndarray
@@ -282,15 +275,14 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         pair, spread = self._proposal  # the proposal means and the particles (self._x is pair[n:])
         self._proposal = None
         n = spread.shape[0]
-        means, d, cov, current = paired_moments(pair, self._weights, n)
-        mean = means[:n]
+        mean, current_mean, cov, current = paired_moments(pair, self._weights, n)
         cov += spread
         if not np.isfinite(cov).all():  # (a non-finite mean makes the covariance non-finite)
             return  # a runaway proposal: leave the sampled cloud to the non-finite checks
         if resampling:
             self._moment_target = (self._x, mean, cov)
             return
-        matched = map_moments(d[n:], current, mean, cov, symmetric=True)
+        matched = map_moments(self._x, current_mean, current, mean, cov, symmetric=True)
         if matched is not None:
             self._x = matched
 

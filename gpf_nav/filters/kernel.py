@@ -22,6 +22,7 @@ import math
 
 import numpy as np
 
+from gpf_nav.kernels import cloud
 from gpf_nav.linalg import cholesky_or_none, triangular_inverse
 
 
@@ -42,37 +43,28 @@ def default_bandwidth(n_particles: int, dim: int) -> float:
     return min(MAX_BANDWIDTH, BANDWIDTH_SCALE * optimal_bandwidth(n_particles, dim))
 
 
-def weighted_moments(x: np.ndarray, weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(mean (n,), deviations x - mean (n, N), covariance (n, n))`` of the cloud ``x`` ``(n, N)`` with
-    normalised ``weights`` ``(N,)``, or equal weights when None (one pass less). The covariance is
-    exactly symmetric: it is formed as ``A A^T`` (``A = d sqrt(w)``), which numpy computes as such."""
+def weighted_moments(x: np.ndarray, weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """``(mean (n,), covariance (n, n))`` of the cloud ``x`` ``(n, N)`` with normalised ``weights`` ``(N,)``,
+    or equal weights when None; the covariance is exactly symmetric (:func:`gpf_nav.kernels.cloud.moments`)."""
     if weights is None:
-        share = 1.0 / x.shape[1]
-        mean = x @ np.full(x.shape[1], share)  # a product: cheaper than a mean along the rows
-        d = x - mean[:, None]
-        return mean, d, (d @ d.T) * share
-    mean = x @ weights
-    d = x - mean[:, None]
-    root = d * np.sqrt(weights)
-    return mean, d, root @ root.T
+        weights = np.full(x.shape[1], 1.0 / x.shape[1])
+    return cloud.moments(np.ascontiguousarray(x), weights)
 
 
 def paired_moments(x: np.ndarray, weights: np.ndarray, n: int
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`weighted_moments` of the two clouds stacked in ``x`` ``(2 n, N)`` (rows ``:n`` and ``n:``)
-    with normalised ``weights`` ``(N,)``, one pass over both for their means and deviations:
-    ``(means (2 n,), deviations (2 n, N), covariance of the first (n, n), of the second (n, n))``."""
-    mean = x @ weights
-    d = x - mean[:, None]
-    root = d * np.sqrt(weights)
-    first, second = root[:n], root[n:]
-    return mean, d, first @ first.T, second @ second.T
+    with normalised ``weights`` ``(N,)``: ``(mean of the first (n,), of the second (n,), covariance of the
+    first (n, n), of the second (n, n))``."""
+    first_mean, first = cloud.moments(x[:n], weights)
+    second_mean, second = cloud.moments(x[n:], weights)
+    return first_mean, second_mean, first, second
 
 
 def shrink(x: np.ndarray, weights: np.ndarray, bandwidth: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Weighted mean ``m`` ``(n,)`` (the centres' too), kernel centres ``(n, N)`` and kernel covariance
     ``h^2 P`` ``(n, n)`` of the cloud ``x`` ``(n, N)`` with normalised ``weights`` ``(N,)``."""
-    mean, _, cov = weighted_moments(x, weights)
+    mean, cov = weighted_moments(x, weights)
     a = math.sqrt(1.0 - bandwidth ** 2)
     centres = a * x
     centres += ((1.0 - a) * mean)[:, None]
@@ -90,20 +82,19 @@ def match_moments(x: np.ndarray, weights: np.ndarray | None, mean: np.ndarray,
     The map of ``T x + b``, for ``T`` lower triangular with a positive diagonal (such as this map), is
     the map of ``x`` (the Cholesky factor of ``T P T^T`` is ``T L_P``): mapping a cloud, resampling it
     and mapping the copies moves them where mapping the resampled copies once does."""
-    _, d, current = weighted_moments(x, weights)
-    return map_moments(d, current, mean, cov, symmetric)
+    x = np.ascontiguousarray(x)
+    current_mean, current = weighted_moments(x, weights)
+    return map_moments(x, current_mean, current, mean, cov, symmetric)
 
 
-def map_moments(d: np.ndarray, current: np.ndarray, mean: np.ndarray, cov: np.ndarray,
-                symmetric: bool = False) -> np.ndarray | None:
-    """:func:`match_moments` of a cloud given by its deviations from its mean ``d`` ``(n, N)`` and its
-    exactly symmetric covariance ``current`` ``(n, n)`` (as :func:`weighted_moments` gives it):
-    ``mean + L_cov L_current^-1 d``, or None."""
+def map_moments(x: np.ndarray, current_mean: np.ndarray, current: np.ndarray, mean: np.ndarray,
+                cov: np.ndarray, symmetric: bool = False) -> np.ndarray | None:
+    """:func:`match_moments` of a cloud ``x`` ``(n, N)`` (C-contiguous) whose weighted mean ``(n,)`` and
+    exactly symmetric covariance ``(n, n)`` are ``current_mean`` and ``current`` (as
+    :func:`weighted_moments` gives them): ``mean + L_cov L_current^-1 (x - current_mean)``, or None."""
     if not np.isfinite(current).all():
         return None
     source, target = cholesky_or_none(current, symmetric=True), cholesky_or_none(cov, symmetric)
     if source is None or target is None:
         return None
-    out = (target @ triangular_inverse(source)) @ d
-    out += mean[:, None]
-    return out
+    return cloud.affine(x, current_mean, target @ triangular_inverse(source), np.asarray(mean, dtype=float))

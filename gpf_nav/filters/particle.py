@@ -151,8 +151,7 @@ class ParticleFilter(Filter):
     def covariance(self):
         """Weighted covariance ``(n, n)`` of the cloud (plus the pending ``Q``), positive definite: a
         degenerate cloud gets the floor of :func:`~gpf_nav.linalg.positive_definite`."""
-        d = self._x - (self._x @ self._weights)[:, None]
-        cov = (d * self._weights) @ d.T
+        cov = weighted_moments(self._x, self._weights)[1]
         if self._pending_dt > 0.0:
             cov = cov + self.model.process_noise(self._pending_dt, self._pending_t)
         return positive_definite(cov)
@@ -288,7 +287,7 @@ class ParticleFilter(Filter):
 
     def _predicted_moments(self) -> tuple[np.ndarray, np.ndarray]:
         """Mean ``(n,)`` and covariance ``(n, n)`` of the predicted cloud, pending process noise included."""
-        _, _, cov = weighted_moments(self._x, self._weights)
+        cov = weighted_moments(self._x, self._weights)[1]
         if self._pending_dt > 0.0:
             cov = cov + self.model.process_noise(self._pending_dt, self._pending_t)
         return self._cloud_mean(), cov
@@ -315,7 +314,8 @@ class ParticleFilter(Filter):
         scale = np.sqrt(np.maximum(cov.diagonal(), 1e-300))
         P_prior = cov / np.outer(scale, scale)
         m_prior = mean / scale
-        m_post, _, P_post = weighted_moments(self._x / scale[:, None], self._weights)
+        m_post, P_post = weighted_moments(self._x, self._weights)
+        m_post, P_post = m_post / scale, P_post / np.outer(scale, scale)
         if basis.shape[1] >= n:
             m, P = m_prior, P_prior
         else:

@@ -32,6 +32,7 @@ from functools import lru_cache
 import numpy as np
 from scipy.linalg import expm
 
+from gpf_nav.kernels import orbit
 from gpf_nav.models.state_space import StateSpaceModel
 
 FRAME_STEP = 1e-6
@@ -74,6 +75,8 @@ class ModelErrorCompensation(StateSpaceModel):
         self._integrated_into = np.asarray(base.position_index, dtype=int) if pairs else None
         self._driven = _rows(self.acceleration_of)
         self._integrated = None if self._integrated_into is None else _rows(self._integrated_into)
+        self._integrated_rows = (np.zeros(0, dtype=int) if self._integrated_into is None
+                                 else self._integrated_into)  # (the kernel's form)
         p = len(driven)
         self.state_dim = n + p
         self.measurement_dim = base.measurement_dim
@@ -134,11 +137,16 @@ class ModelErrorCompensation(StateSpaceModel):
         moved = out[:self._n]
         moved[...] = self.base.transition(xt[:self._n].T, dt, t, u).T
         frame = self._frame(xt[:self._n])
-        push = a if frame is None else np.einsum("ijn,jn->in", frame, a)  # on the state's own axes
         # G has one velocity (and one position) entry per column: add them without a matrix product
-        moved[self._driven] += push * G[self.acceleration_of[0], 0]
-        if self._integrated_into is not None:
-            moved[self._integrated] += push * G[self._integrated_into[0], 0]
+        velocity_gain = G[self.acceleration_of[0], 0]
+        position_gain = 0.0 if self._integrated_into is None else G[self._integrated_into[0], 0]
+        if frame is None:
+            moved[self._driven] += a * velocity_gain
+            if self._integrated_into is not None:
+                moved[self._integrated] += a * position_gain
+        else:  # turned to the state's own axes by each particle's frame
+            orbit.push(moved, np.ascontiguousarray(frame), np.ascontiguousarray(a), self.acceleration_of,
+                       self._integrated_rows, velocity_gain, position_gain)
         np.multiply(a, decay, out=out[self._n:])
         return out.T
 

@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from gpf_nav.kernels import orbit
 from gpf_nav.models.state_space import StateSpaceModel
 
 MU_MOON = 4.9028e12
@@ -84,76 +85,26 @@ class LunarDescentModel(StateSpaceModel):
         return np.concatenate([xt[3:], self._acceleration(xt[:3], _as_input(u))]).T
 
     def transition(self, x, dt, t=0.0, u=None):
-        """Kick-drift-kick leapfrog (second order, symplectic) in :meth:`_substeps` sub-steps."""
-        u = _as_input(u)
+        """Kick-drift-kick leapfrog (second order, symplectic) in :meth:`_substeps` sub-steps
+        (:func:`gpf_nav.kernels.orbit.leapfrog`)."""
         steps = self._substeps(dt)
-        h = dt / steps
-        xt = x.T
-        r, v = xt[:3].copy(), xt[3:].copy()
-        a = self._acceleration(r, u)
-        for _ in range(steps):
-            v += (0.5 * h) * a
-            r += h * v
-            a = self._acceleration(r, u)
-            v += (0.5 * h) * a
-        return np.concatenate([r, v]).T
-
-    def gravity_gradient(self, r: np.ndarray) -> np.ndarray:
-        """``d(gravity)/dr`` ``(N, 3, 3)`` at positions ``(N, 3)``."""
-        r2 = np.maximum(np.einsum("ij,ij->i", r, r), _MIN_RANGE_SQ)
-        k = -self.gm * r2 ** -1.5
-        outer = r[:, :, None] * r[:, None, :] / r2[:, None, None]
-        return k[:, None, None] * (np.eye(3) - 3.0 * outer)
+        return orbit.leapfrog(_particle_last(x), self.gm, dt / steps, steps, _input_columns(u)).T
 
     def transition_jacobian(self, x, dt, t=0.0, u=None):
-        """Second-order Taylor ``I + A h + (A h)^2 / 2`` chained over the sub-steps of :meth:`transition`."""
+        """Second-order Taylor ``I + A h + (A h)^2 / 2`` chained over the sub-steps of :meth:`transition`
+        (:func:`gpf_nav.kernels.orbit.leapfrog_jacobian`)."""
         steps = self._substeps(dt)
-        h = dt / steps
-        n = x.shape[0]
-        phi = np.broadcast_to(np.eye(6), (n, 6, 6)).copy()
-        state = np.asarray(x, dtype=float)
-        for _ in range(steps):
-            a = np.zeros((n, 6, 6))
-            a[:, :3, 3:] = np.eye(3)
-            a[:, 3:, :3] = self.gravity_gradient(state[:, :3])
-            ah = a * h
-            step = np.eye(6) + ah + ah @ ah * 0.5
-            phi = step @ phi
-            if steps > 1:
-                state = self.transition(state, h, t, u)
-        return phi
+        return orbit.leapfrog_jacobian(_particle_last(x), self.gm, dt / steps, steps, _input_columns(u))
 
     def compensation_frame(self, x):
         """Radial, along-track and cross-track axes ``(N, 3, 3)`` (columns) of the osculating orbit at
         ``x`` ``(N, 6)``: the frame of orbit determination's empirical accelerations, in which gravity-field
         errors (radial), drag and thrust (along-track) keep their direction. Where the orbit plane is
         undefined (``r`` parallel to ``v``) the cross-track axis is any one normal to ``r``; at the
-        Moon's centre, or for a non-finite ``x``, the frame is the world's. Built particle-last (rows of
-        ``N``) and returned as the ``(N, 3, 3)`` view; one state is computed in Python floats (the frame of a
-        particle filter's estimate, :mod:`gpf_nav.models.compensation`)."""
-        if x.shape[0] == 1:
-            frame = _point_frame(x[0])
-            if frame is not None:
-                return frame
-        xt = x.T
-        r, v = xt[:3], xt[3:6]
-        frame = np.empty((3, 3, x.shape[0]))  # (component, axis, particle)
-        radial, along, normal = frame[:, 0], frame[:, 1], frame[:, 2]
-        np.divide(r, np.maximum(np.sqrt(np.einsum("in,in->n", r, r)), _MIN_RANGE), out=radial)
-        _cross(radial, v, out=normal)
-        size = np.sqrt(np.einsum("in,in->n", normal, normal))
-        speed2 = np.einsum("in,in->n", v, v)
-        # every orbit plane defined when the smallest size passes the largest speed's threshold; the sizes
-        # are then positive and the states finite (a non-finite one fails the test): a frame of finite axes
-        if size.min() > 1e-12 * max(math.sqrt(speed2.max()), 1.0):
-            normal /= size
-            # normal x radial = (v - (radial . v) radial) / size: the velocity less its radial part
-            np.multiply(radial, np.einsum("in,in->n", radial, v), out=along)
-            np.subtract(v, along, out=along)
-            along /= size
-        else:
-            _degenerate_frames(frame, size, speed2)
-        return frame.transpose(2, 0, 1)
+        Moon's centre, or for a non-finite ``x``, the frame is the world's
+        (:func:`gpf_nav.kernels.orbit.frames`). Built particle-last and returned as the ``(N, 3, 3)`` view
+        (:mod:`gpf_nav.models.compensation` takes the particle-last array back)."""
+        return orbit.frames(_particle_last(x)).transpose(2, 0, 1)
 
     def process_noise(self, dt):
         q = self.accel_noise_density ** 2
@@ -228,47 +179,21 @@ def _as_input(u):
     return None if not np.any(u) else u
 
 
-def _point_frame(x: np.ndarray) -> np.ndarray | None:
-    """:meth:`LunarDescentModel.compensation_frame` ``(1, 3, 3)`` of one state ``x`` ``(6,)`` in Python floats
-    (the same operations; at one point numpy's calls cost more than the arithmetic), or None where the
-    orbit plane is undefined or the state is not finite (the array path handles those)."""
-    r0, r1, r2, v0, v1, v2 = x[:6].tolist()
-    size_r = max(math.sqrt(r0 * r0 + r1 * r1 + r2 * r2), _MIN_RANGE)
-    a0, a1, a2 = r0 / size_r, r1 / size_r, r2 / size_r  # radial
-    n0, n1, n2 = a1 * v2 - a2 * v1, a2 * v0 - a0 * v2, a0 * v1 - a1 * v0
-    size = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
-    if not size > 1e-12 * max(math.sqrt(v0 * v0 + v1 * v1 + v2 * v2), 1.0):  # (NaN fails too)
-        return None
-    n0, n1, n2 = n0 / size, n1 / size, n2 / size
-    along = a0 * v0 + a1 * v1 + a2 * v2
-    t0, t1, t2 = (v0 - along * a0) / size, (v1 - along * a1) / size, (v2 - along * a2) / size
-    return np.array([[[a0, t0, n0], [a1, t1, n1], [a2, t2, n2]]])
+def _particle_last(x: np.ndarray) -> np.ndarray:
+    """States ``(N, 6)`` as the C-contiguous ``(6, N)`` array the kernels take (no copy for a filter's
+    particles, stored that way)."""
+    return np.ascontiguousarray(np.asarray(x, dtype=float).T)
 
 
-def _degenerate_frames(frame: np.ndarray, size: np.ndarray, speed2: np.ndarray) -> None:
-    """Finish :meth:`LunarDescentModel.compensation_frame` ``(3, 3, N)`` (radial axes and unnormalised
-    normals ``(3, N)`` of norms ``size`` in place) where some orbit plane is undefined (``r`` parallel to
-    ``v``, of squared norms ``speed2`` ``(N,)``): there any axis normal to ``r``, the cross product with the
-    least-aligned base axis; where no frame results (``r = 0``, a non-finite state), the world's."""
-    radial, along, normal = frame[:, 0], frame[:, 1], frame[:, 2]
-    flat = ~(size > 1e-12 * np.maximum(np.sqrt(speed2), 1.0))
-    base = np.eye(3)[:, np.argmin(np.abs(radial[:, flat]), axis=0)]
-    normal[:, flat] = _cross(radial[:, flat], base)
-    size[flat] = np.sqrt(np.einsum("in,in->n", normal[:, flat], normal[:, flat]))
-    with np.errstate(invalid="ignore", divide="ignore"):  # r = 0: no frame, replaced below
-        normal /= size
-    _cross(normal, radial, out=along)
-    bad = ~np.isfinite(frame).all(axis=(0, 1))
-    if bad.any():
-        frame[:, :, bad] = np.eye(3)[:, :, None]
+_NO_INPUT = np.zeros((3, 1))
 
 
-def _cross(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """Cross products ``(3, N)`` of the columns of ``a`` and ``b`` ``(3, N)``, written into ``out`` when
-    given."""
-    if out is None:
-        out = np.empty(a.shape)
-    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):  # the three components
-        np.multiply(a[j], b[k], out=out[i])
-        out[i] -= a[k] * b[j]
-    return out
+def _input_columns(u) -> np.ndarray:
+    """The specific force as the kernels take it: ``(3, 1)`` for one input (zeros for none), ``(3, N)``
+    for one per particle."""
+    u = _as_input(u)
+    if u is None:
+        return _NO_INPUT
+    return np.ascontiguousarray(u.T) if u.ndim == 2 else u.reshape(3, 1)
+
+

@@ -1,0 +1,139 @@
+"""The lunar model's inner loops: two-body leapfrog flow and its Jacobian, orbit frames, and an
+acceleration given in those frames pushed onto the velocities and positions (the compensated transition).
+
+States are particle-last: ``x`` ``(6, N)`` with rows ``r`` (0:3) and ``v`` (3:6); the specific force ``u``
+is ``(3, K)`` with ``K`` 1 (one input for every particle) or ``N``. The arithmetic is the numpy code's,
+operation for operation, per particle.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+MIN_RANGE_SQ = 1.0
+"""m^2: floor of |r|^2 that keeps gravity finite at the Moon's centre."""
+MIN_RANGE = 1.0
+"""m: floor of the range of the orbit frame's radial axis."""
+
+
+@njit(cache=True, error_model="numpy")
+def _gravity(r0, r1, r2, gm):
+    """The factor ``k`` of two-body gravity ``k r`` at ``r`` (``|r|^2`` floored at :data:`MIN_RANGE_SQ`)."""
+    rr = r0 * r0 + r1 * r1 + r2 * r2
+    rr = max(rr, MIN_RANGE_SQ)
+    return -gm / (rr * math.sqrt(rr))
+
+
+@njit(cache=True, error_model="numpy")
+def leapfrog(x: np.ndarray, gm: float, h: float, steps: int, u: np.ndarray) -> np.ndarray:
+    """Kick-drift-kick leapfrog of ``steps`` sub-steps ``h`` under two-body gravity ``gm`` plus the specific
+    force ``u`` ``(3, K)``, from the states ``x`` ``(6, N)`` (C-contiguous): the new states ``(6, N)``."""
+    out = np.empty((6, x.shape[1]))
+    half = 0.5 * h
+    for j in range(x.shape[1]):
+        ju = j if u.shape[1] > 1 else 0
+        r0, r1, r2 = x[0, j], x[1, j], x[2, j]
+        v0, v1, v2 = x[3, j], x[4, j], x[5, j]
+        k = _gravity(r0, r1, r2, gm)
+        a0, a1, a2 = r0 * k + u[0, ju], r1 * k + u[1, ju], r2 * k + u[2, ju]
+        for _ in range(steps):
+            v0 += half * a0
+            v1 += half * a1
+            v2 += half * a2
+            r0 += h * v0
+            r1 += h * v1
+            r2 += h * v2
+            k = _gravity(r0, r1, r2, gm)
+            a0, a1, a2 = r0 * k + u[0, ju], r1 * k + u[1, ju], r2 * k + u[2, ju]
+            v0 += half * a0
+            v1 += half * a1
+            v2 += half * a2
+        out[0, j], out[1, j], out[2, j] = r0, r1, r2
+        out[3, j], out[4, j], out[5, j] = v0, v1, v2
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def leapfrog_jacobian(x: np.ndarray, gm: float, h: float, steps: int, u: np.ndarray) -> np.ndarray:
+    """Jacobians ``(N, 6, 6)`` of :func:`leapfrog` at ``x`` ``(6, N)``: the second-order Taylor step
+    ``I + A h + (A h)^2 / 2`` (``A = [[0, I], [gravity gradient, 0]]``) chained over the sub-steps, the
+    state moved along by one leapfrog sub-step between them."""
+    count = x.shape[1]
+    out = np.empty((count, 6, 6))
+    eye = np.eye(6)
+    A = np.zeros((6, 6))
+    for i in range(3):
+        A[i, 3 + i] = h
+    for j in range(count):
+        phi = eye.copy()
+        col = x[:, j:j + 1].copy()
+        for _ in range(steps):
+            r0, r1, r2 = col[0, 0], col[1, 0], col[2, 0]
+            rr = max(r0 * r0 + r1 * r1 + r2 * r2, MIN_RANGE_SQ)
+            k = -gm * rr ** -1.5
+            r = (r0, r1, r2)
+            for a in range(3):
+                for b in range(3):
+                    g = (1.0 if a == b else 0.0) - 3.0 * (r[a] * r[b] / rr)
+                    A[3 + a, b] = (k * g) * h
+            step_matrix = eye + A + (A @ A) * 0.5
+            phi = step_matrix @ phi
+            if steps > 1:
+                col = leapfrog(col, gm, h, 1, u[:, j:j + 1] if u.shape[1] > 1 else u)
+        out[j] = phi
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def frames(x: np.ndarray) -> np.ndarray:
+    """Radial, along-track and cross-track axes ``(3, 3, N)`` (component, axis, particle) of the osculating
+    orbits of ``x`` ``(6, N)`` (C-contiguous); where the orbit plane is undefined the cross-track axis is
+    the cross product of the radial axis with the least-aligned base axis, and where no frame results
+    (``r = 0``, a non-finite state) the frame is the world's."""
+    frame = np.empty((3, 3, x.shape[1]))
+    for j in range(x.shape[1]):
+        r0, r1, r2, v0, v1, v2 = x[0, j], x[1, j], x[2, j], x[3, j], x[4, j], x[5, j]
+        size_r = max(math.sqrt(r0 * r0 + r1 * r1 + r2 * r2), MIN_RANGE)
+        a0, a1, a2 = r0 / size_r, r1 / size_r, r2 / size_r
+        n0, n1, n2 = a1 * v2 - a2 * v1, a2 * v0 - a0 * v2, a0 * v1 - a1 * v0
+        size = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        if size > 1e-12 * max(math.sqrt(v0 * v0 + v1 * v1 + v2 * v2), 1.0):
+            n0, n1, n2 = n0 / size, n1 / size, n2 / size
+            along = a0 * v0 + a1 * v1 + a2 * v2
+            t0, t1, t2 = (v0 - a0 * along) / size, (v1 - a1 * along) / size, (v2 - a2 * along) / size
+        else:  # no orbit plane: any axis normal to r, with the least-aligned base axis
+            m0, m1, m2 = abs(a0), abs(a1), abs(a2)
+            b = 0 if (m0 <= m1 and m0 <= m2) else (1 if m1 <= m2 else 2)
+            e0, e1, e2 = (1.0 if b == 0 else 0.0), (1.0 if b == 1 else 0.0), (1.0 if b == 2 else 0.0)
+            n0, n1, n2 = a1 * e2 - a2 * e1, a2 * e0 - a0 * e2, a0 * e1 - a1 * e0
+            size = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+            n0, n1, n2 = n0 / size, n1 / size, n2 / size
+            t0, t1, t2 = n1 * a2 - n2 * a1, n2 * a0 - n0 * a2, n0 * a1 - n1 * a0
+        axes = (a0, a1, a2, t0, t1, t2, n0, n1, n2)
+        finite = True
+        for value in axes:
+            finite = finite and math.isfinite(value)
+        for c in range(3):
+            for axis in range(3):
+                frame[c, axis, j] = axes[3 * axis + c] if finite else (1.0 if c == axis else 0.0)
+    return frame
+
+
+@njit(cache=True, error_model="numpy")
+def push(moved: np.ndarray, frame: np.ndarray, a: np.ndarray, driven: np.ndarray, integrated: np.ndarray,
+         velocity_gain: float, position_gain: float) -> None:
+    """Add the acceleration ``a`` ``(p, N)``, given in the local ``frame`` ``(p, p, N)``, to the states
+    ``moved`` ``(n, N)`` in place: ``F a`` times ``velocity_gain`` onto the rows ``driven`` ``(p,)`` and times
+    ``position_gain`` onto the rows ``integrated`` ``(p,)`` (empty: none)."""
+    p = a.shape[0]
+    for j in range(a.shape[1]):
+        for i in range(p):
+            s = 0.0
+            for k in range(p):
+                s += frame[i, k, j] * a[k, j]
+            moved[driven[i], j] += s * velocity_gain
+            if integrated.size:
+                moved[integrated[i], j] += s * position_gain

@@ -1,0 +1,140 @@
+"""The numpy code the compiled kernels (gpf_nav/kernels) replaced, kept as the tests' oracle: the same
+operations as the filters and the lunar model ran before the kernels (at 200c859)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from gpf_nav.linalg import cholesky_or_none, triangular_inverse
+
+MIN_RANGE_SQ = 1.0
+MIN_RANGE = 1.0
+
+
+def weighted_moments(x, weights):
+    """``(mean (n,), covariance (n, n))`` of ``x`` ``(n, N)`` with normalised ``weights`` ``(N,)``."""
+    mean = x @ weights
+    d = x - mean[:, None]
+    root = d * np.sqrt(weights)
+    return mean, root @ root.T
+
+
+def match_moments(x, weights, mean, cov):
+    """``mean + L_cov L_x^-1 (x - m_x)``, or None."""
+    m_x, current = weighted_moments(x, weights)
+    source, target = cholesky_or_none(current, symmetric=True), cholesky_or_none(cov)
+    if source is None or target is None:
+        return None
+    return (target @ triangular_inverse(source)) @ (x - m_x[:, None]) + mean[:, None]
+
+
+def draw(centres, C, m, U, z, log_det):
+    """The GPF's cloud-proposal draw (gpf.py ``_sample``): ``(pair (2 n, N), correction (N,))``."""
+    n = centres.shape[0]
+    w = U @ z
+    w += m
+    pair = np.empty((2 * n, centres.shape[1]))
+    np.matmul(C, m, out=pair[:n])
+    pair[:n] += centres
+    np.matmul(C, w, out=pair[n:])
+    pair[n:] += centres
+    correction = np.einsum("kn,kn->n", z, z)
+    correction -= np.einsum("kn,kn->n", w, w)
+    correction *= 0.5
+    correction += log_det
+    return pair, correction
+
+
+def systematic(weights, uniform):
+    n = weights.size
+    cdf = np.cumsum(weights)
+    cdf /= cdf[-1]
+    cdf[-1] = 1.0
+    edges = np.ceil(n * cdf - uniform)
+    counts = np.diff(np.clip(edges, 0, n), prepend=0.0).astype(np.intp)
+    return np.repeat(np.arange(n), counts)
+
+
+def _acceleration(r, gm, u):
+    r2 = np.einsum("ij,ij->j", r, r)
+    np.maximum(r2, MIN_RANGE_SQ, out=r2)
+    a = r * (-gm / (r2 * np.sqrt(r2)))
+    if u is not None:
+        a += u.T if u.ndim == 2 else u[:, None]
+    return a
+
+
+def leapfrog(x, gm, h, steps, u=None):
+    """Lunar transition over ``steps`` sub-steps ``h`` of ``x`` ``(N, 6)``: ``(N, 6)``."""
+    xt = x.T
+    r, v = xt[:3].copy(), xt[3:].copy()
+    a = _acceleration(r, gm, u)
+    for _ in range(steps):
+        v += (0.5 * h) * a
+        r += h * v
+        a = _acceleration(r, gm, u)
+        v += (0.5 * h) * a
+    return np.concatenate([r, v]).T
+
+
+def leapfrog_jacobian(x, gm, h, steps, u=None):
+    """``(N, 6, 6)``: ``I + A h + (A h)^2 / 2`` chained over the sub-steps."""
+    n = x.shape[0]
+    phi = np.broadcast_to(np.eye(6), (n, 6, 6)).copy()
+    state = np.asarray(x, dtype=float)
+    for _ in range(steps):
+        r = state[:, :3]
+        r2 = np.maximum(np.einsum("ij,ij->i", r, r), MIN_RANGE_SQ)
+        k = -gm * r2 ** -1.5
+        outer = r[:, :, None] * r[:, None, :] / r2[:, None, None]
+        a = np.zeros((n, 6, 6))
+        a[:, :3, 3:] = np.eye(3)
+        a[:, 3:, :3] = k[:, None, None] * (np.eye(3) - 3.0 * outer)
+        ah = a * h
+        phi = (np.eye(6) + ah + ah @ ah * 0.5) @ phi
+        if steps > 1:
+            state = leapfrog(state, gm, h, 1, u)
+    return phi
+
+
+def _cross(a, b):
+    out = np.empty(a.shape)
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        out[i] = a[j] * b[k] - a[k] * b[j]
+    return out
+
+
+def frames(x):
+    """Orbit frames ``(N, 3, 3)`` of ``x`` ``(N, 6)`` (columns radial, along-track, cross-track)."""
+    xt = x.T
+    r, v = xt[:3], xt[3:6]
+    frame = np.empty((3, 3, x.shape[0]))
+    radial = r / np.maximum(np.sqrt(np.einsum("in,in->n", r, r)), MIN_RANGE)
+    normal = _cross(radial, v)
+    size = np.sqrt(np.einsum("in,in->n", normal, normal))
+    speed2 = np.einsum("in,in->n", v, v)
+    flat = ~(size > 1e-12 * np.maximum(np.sqrt(speed2), 1.0))
+    base = np.eye(3)[:, np.argmin(np.abs(radial), axis=0)]
+    normal[:, flat] = _cross(radial[:, flat], base[:, flat])
+    size[flat] = np.sqrt(np.einsum("in,in->n", normal[:, flat], normal[:, flat]))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        normal = normal / size
+    along = (v - radial * np.einsum("in,in->n", radial, v)) / np.where(flat, 1.0, np.sqrt(
+        np.einsum("in,in->n", _cross(radial, v), _cross(radial, v))))
+    along[:, flat] = _cross(normal[:, flat], radial[:, flat])
+    frame[:, 0], frame[:, 1], frame[:, 2] = radial, along, normal
+    with np.errstate(invalid="ignore"):
+        bad = ~np.isfinite(frame).all(axis=(0, 1))
+    frame[:, :, bad] = np.eye(3)[:, :, None]
+    return frame.transpose(2, 0, 1)
+
+
+def push(moved, frame, a, driven, integrated, velocity_gain, position_gain):
+    """``moved`` ``(n, N)`` plus the pushed acceleration (compensation.py ``transition``), a new array."""
+    moved = moved.copy()
+    pushed = np.einsum("ijn,jn->in", frame, a)
+    moved[driven] += pushed * velocity_gain
+    if integrated.size:
+        moved[integrated] += pushed * position_gain
+    return moved

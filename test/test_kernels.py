@@ -1,0 +1,165 @@
+"""The compiled kernels (gpf_nav/kernels) against the numpy code they replaced (test/numpy_reference.py)
+on the same inputs, and a short seeded run of the particle filters against the estimates the numpy code
+gave (test/data/kernels_reference.json: :func:`_run` of every filter on the numpy code, at 200c859)."""
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import numpy_reference as reference
+from gpf_nav import resampling
+from gpf_nav.filters import BootstrapPF, GeometricProjectionPF, MultipleModelGPF
+from gpf_nav.filters.kernel import match_moments
+from gpf_nav.kernels import cloud, orbit, proposal
+from gpf_nav.kernels.systematic import systematic_ancestors
+from gpf_nav.models.compensation import ModelErrorCompensation
+from gpf_nav.models.lunar import MU_MOON, LunarDescentModel
+from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
+
+RTOL = 1e-12
+SIZES = (1, 7, 500, 3001)  # below, at and across the kernels' blocks of 256 particles
+REFERENCE = Path(__file__).with_name("data") / "kernels_reference.json"
+
+
+def _cloud(rng, n, count):
+    x = rng.standard_normal((n, count)) * rng.uniform(1.0, 1e3, (n, 1)) + rng.uniform(-1e6, 1e6, (n, 1))
+    w = rng.random(count) ** 4
+    return x, w / w.sum()
+
+
+def _orbits(rng, count):
+    """States ``(6, N)`` around a 1 838 km orbit, with a few degenerate ones (r parallel to v, r = 0,
+    v = 0, NaN)."""
+    r = rng.standard_normal((3, count))
+    r *= 1.838e6 / np.linalg.norm(r, axis=0)
+    v = rng.standard_normal((3, count)) * 1.6e3
+    x = np.vstack([r, v])
+    if count >= 7:
+        x[:, :4] = [[1.8e6, 0, 0, np.nan], [0, 0, 0, 0], [0, 0, 0, 0], [10.0, 0, 5.0, 0], [0, 0, 0, 0], [0, 0, 1.0, 0]]
+    return np.ascontiguousarray(x)
+
+
+def _close(got, expected, rtol=RTOL, atol=0.0):
+    np.testing.assert_allclose(got, expected, rtol=rtol, atol=atol)
+
+
+@pytest.mark.parametrize("count", SIZES)
+def test_moments_and_affine_map_are_the_numpy_ones(count):
+    rng = np.random.default_rng(count)
+    x, w = _cloud(rng, 9, count)
+    mean, cov = cloud.moments(x, w)
+    expected_mean, expected_cov = reference.weighted_moments(x, w)
+    _close(mean, expected_mean)
+    scale = np.sqrt(np.outer(np.diag(expected_cov), np.diag(expected_cov)))
+    _close(cov / np.where(scale > 0, scale, 1.0), expected_cov / np.where(scale > 0, scale, 1.0), atol=1e-12)
+    np.testing.assert_array_equal(cov, cov.T)
+    if count >= 9:
+        target = rng.standard_normal(9)
+        A = rng.standard_normal((9, 9))
+        target_cov = A @ A.T + np.eye(9)
+        _close(match_moments(x, w, target, target_cov), reference.match_moments(x, w, target, target_cov),
+               atol=1e-9 * np.abs(target).max())
+
+
+@pytest.mark.parametrize("count", SIZES)
+def test_proposal_draw_is_the_numpy_one(count):
+    rng = np.random.default_rng(10 + count)
+    n = 9
+    centres, _ = _cloud(rng, n, count)
+    C = np.tril(rng.standard_normal((n, n)))
+    U = np.triu(rng.standard_normal((n, n)))
+    m, z = rng.standard_normal((n, count)), rng.standard_normal((n, count))
+    pair, correction = proposal.draw(centres, np.asfortranarray(C), m, U, z, 0.7)
+    expected_pair, expected_correction = reference.draw(centres, C, m, U, z, 0.7)
+    _close(pair, expected_pair, atol=1e-12 * np.abs(centres).max())
+    _close(correction, expected_correction, atol=1e-12 * np.abs(expected_correction).max())
+
+
+@pytest.mark.parametrize("count", SIZES)
+def test_systematic_resampling_is_the_numpy_one(count):
+    rng = np.random.default_rng(20 + count)
+    _, w = _cloud(rng, 1, count)
+    for uniform in (0.0, 0.37, 0.999):
+        np.testing.assert_array_equal(systematic_ancestors(w, uniform), reference.systematic(w, uniform))
+    # the largest uniform draw, 1 - 2^-53, rounds N - U to N - 1: the numpy code lost the last ancestor
+    assert systematic_ancestors(w, 1.0 - 2.0 ** -53).size == count
+    # the stream: one uniform from the filter's generator, as before
+    a, b = np.random.default_rng(5), np.random.default_rng(5)
+    np.testing.assert_array_equal(resampling.systematic(w, a), reference.systematic(w, b.random()))
+    assert a.random() == b.random()
+
+
+@pytest.mark.parametrize("count", SIZES)
+@pytest.mark.parametrize("steps", (1, 3))
+@pytest.mark.parametrize("inputs", ("none", "one", "each"))
+def test_lunar_flow_and_jacobian_are_the_numpy_ones(count, steps, inputs):
+    rng = np.random.default_rng(30 + count)
+    x = _orbits(rng, count)[:, 4:] if count >= 7 else _orbits(rng, count)
+    u = {"none": None, "one": np.array([0.1, -0.2, 0.3]), "each": rng.standard_normal((x.shape[1], 3))}[inputs]
+    model = LunarDescentModel(max_step=10.0)
+    dt = 10.0 * steps
+    _close(model.transition(x.T, dt, 0.0, u), reference.leapfrog(x.T, MU_MOON, 10.0, steps, u))
+    _close(model.transition_jacobian(x.T, dt, 0.0, u), reference.leapfrog_jacobian(x.T, MU_MOON, 10.0, steps, u),
+           atol=1e-15)
+
+
+@pytest.mark.parametrize("count", SIZES)
+def test_orbit_frames_and_push_are_the_numpy_ones(count):
+    rng = np.random.default_rng(40 + count)
+    x = _orbits(rng, count)
+    frame = LunarDescentModel().compensation_frame(x.T)
+    _close(frame, reference.frames(x.T), atol=1e-15)
+    a = np.ascontiguousarray(rng.standard_normal((3, count)))
+    moved = np.ascontiguousarray(rng.standard_normal((9, count)))
+    expected = reference.push(moved, frame.transpose(1, 2, 0), a, np.arange(3, 6), np.arange(3), 2.0, 2.5)
+    orbit.push(moved, np.ascontiguousarray(frame.transpose(1, 2, 0)), a, np.arange(3, 6), np.arange(3), 2.0, 2.5)
+    _close(moved, expected, atol=1e-15)
+
+
+def test_compensated_lunar_transition_is_the_numpy_one():
+    rng = np.random.default_rng(50)
+    model = ModelErrorCompensation(LunarDescentModel(), 1e6, 0.1)
+    x = np.vstack([_orbits(rng, 300)[:, 4:], rng.standard_normal((3, 296)) * 0.1])
+    G, decay = model._coupling(2.0)
+    base = reference.leapfrog(x[:6].T, MU_MOON, 2.0, 1).T
+    pushed = reference.push(base, reference.frames(x[:6].T).transpose(1, 2, 0), x[6:], np.arange(3, 6),
+                            np.arange(3), G[3, 0], G[0, 0])
+    _close(model.transition(np.ascontiguousarray(x).T, 2.0), np.vstack([pushed, x[6:] * decay]).T)
+
+
+FILTERS = {
+    "gpf": lambda model, n: MultipleModelGPF(model, n, seed=0),
+    "gpf-single": lambda model, n: GeometricProjectionPF(model, n, seed=0),
+    "gpf-paper": lambda model, n: GeometricProjectionPF(model, n, seed=0, metric="euclidean",
+                                                        weighting="likelihood", unmodelled_acceleration_std=0.0),
+    "spf": lambda model, n: BootstrapPF(model, n, seed=0),
+}
+STEPS = 25
+
+
+def _run(name: str, n: int) -> np.ndarray:
+    """Mean and covariance diagonal ``(STEPS, 12)`` of ``STEPS`` steps of the lunar descent (seed 0)."""
+    config = replace(ScenarioConfig(), duration=ScenarioConfig().dt * (STEPS + 1))
+    scenario, model = generate(config, 0), filter_model(config)
+    f = FILTERS[name](model, n)
+    f.initialize(scenario.prior_mean, scenario.prior_cov)
+    out = []
+    for k in range(STEPS):
+        f.predict(config.dt)
+        f.update(scenario.measurements[k])
+        out.append(np.concatenate([f.mean, np.diag(f.covariance)]))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("name", FILTERS)
+def test_seeded_run_gives_the_estimates_of_the_numpy_code(name):
+    """The random streams are those of the numpy code, so the filters' estimates are equal to rounding
+    (which the filters' nonlinear steps grow to about 1e-10 over 25 steps)."""
+    expected = json.loads(REFERENCE.read_text())
+    for n in (500, 3000):
+        _close(_run(name, n), np.array(expected[f"{name}/{n}"]), rtol=1e-9)
+
