@@ -59,7 +59,8 @@ def _affine(x, centre, T, offset):
             for t in range(size):
                 d[a, t] = x[a, start + t] - centre[a]
         for a in range(n):
-            acc[:] = 0.0
+            for t in range(CHUNK):  # (loops, not slice assignments: those take seconds to compile)
+                acc[t] = 0.0
             for b in range(n):
                 c = T[a, b]
                 for t in range(CHUNK):

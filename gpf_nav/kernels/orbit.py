@@ -28,29 +28,37 @@ def _gravity(r0, r1, r2, gm):
 
 
 @njit(cache=True, error_model="numpy")
+def _substep(r0, r1, r2, v0, v1, v2, a0, a1, a2, gm, h, u0, u1, u2):
+    """One kick-drift-kick sub-step ``h`` from ``(r, v)`` with the acceleration ``a`` at ``r``: the new
+    ``(r, v)`` and the acceleration at the new ``r`` (gravity ``gm`` plus ``u``), nine floats."""
+    half = 0.5 * h
+    v0 += half * a0
+    v1 += half * a1
+    v2 += half * a2
+    r0 += h * v0
+    r1 += h * v1
+    r2 += h * v2
+    k = _gravity(r0, r1, r2, gm)
+    a0, a1, a2 = r0 * k + u0, r1 * k + u1, r2 * k + u2
+    v0 += half * a0
+    v1 += half * a1
+    v2 += half * a2
+    return r0, r1, r2, v0, v1, v2, a0, a1, a2
+
+
+@njit(cache=True, error_model="numpy")
 def leapfrog(x: np.ndarray, gm: float, h: float, steps: int, u: np.ndarray) -> np.ndarray:
     """Kick-drift-kick leapfrog of ``steps`` sub-steps ``h`` under two-body gravity ``gm`` plus the specific
     force ``u`` ``(3, K)``, from the states ``x`` ``(6, N)`` (C-contiguous): the new states ``(6, N)``."""
     out = np.empty((6, x.shape[1]))
-    half = 0.5 * h
     for j in range(x.shape[1]):
         ju = j if u.shape[1] > 1 else 0
-        r0, r1, r2 = x[0, j], x[1, j], x[2, j]
-        v0, v1, v2 = x[3, j], x[4, j], x[5, j]
+        u0, u1, u2 = u[0, ju], u[1, ju], u[2, ju]
+        r0, r1, r2, v0, v1, v2 = x[0, j], x[1, j], x[2, j], x[3, j], x[4, j], x[5, j]
         k = _gravity(r0, r1, r2, gm)
-        a0, a1, a2 = r0 * k + u[0, ju], r1 * k + u[1, ju], r2 * k + u[2, ju]
+        a0, a1, a2 = r0 * k + u0, r1 * k + u1, r2 * k + u2
         for _ in range(steps):
-            v0 += half * a0
-            v1 += half * a1
-            v2 += half * a2
-            r0 += h * v0
-            r1 += h * v1
-            r2 += h * v2
-            k = _gravity(r0, r1, r2, gm)
-            a0, a1, a2 = r0 * k + u[0, ju], r1 * k + u[1, ju], r2 * k + u[2, ju]
-            v0 += half * a0
-            v1 += half * a1
-            v2 += half * a2
+            r0, r1, r2, v0, v1, v2, a0, a1, a2 = _substep(r0, r1, r2, v0, v1, v2, a0, a1, a2, gm, h, u0, u1, u2)
         out[0, j], out[1, j], out[2, j] = r0, r1, r2
         out[3, j], out[4, j], out[5, j] = v0, v1, v2
     return out
@@ -63,27 +71,48 @@ def leapfrog_jacobian(x: np.ndarray, gm: float, h: float, steps: int, u: np.ndar
     state moved along by one leapfrog sub-step between them."""
     count = x.shape[1]
     out = np.empty((count, 6, 6))
-    eye = np.eye(6)
     A = np.zeros((6, 6))
     for i in range(3):
         A[i, 3 + i] = h
+    step = np.empty((6, 6))
+    product = np.empty((6, 6))
+    r = np.empty(3)
     for j in range(count):
-        phi = eye.copy()
-        col = x[:, j:j + 1].copy()
+        ju = j if u.shape[1] > 1 else 0
+        u0, u1, u2 = u[0, ju], u[1, ju], u[2, ju]
+        r0, r1, r2, v0, v1, v2 = x[0, j], x[1, j], x[2, j], x[3, j], x[4, j], x[5, j]
+        phi = out[j]
+        for a in range(6):
+            for b in range(6):
+                phi[a, b] = 1.0 if a == b else 0.0
         for _ in range(steps):
-            r0, r1, r2 = col[0, 0], col[1, 0], col[2, 0]
             rr = max(r0 * r0 + r1 * r1 + r2 * r2, MIN_RANGE_SQ)
             k = -gm * rr ** -1.5
-            r = (r0, r1, r2)
+            r[0], r[1], r[2] = r0, r1, r2
             for a in range(3):
                 for b in range(3):
                     g = (1.0 if a == b else 0.0) - 3.0 * (r[a] * r[b] / rr)
                     A[3 + a, b] = (k * g) * h
-            step_matrix = eye + A + (A @ A) * 0.5
-            phi = step_matrix @ phi
-            if steps > 1:
-                col = leapfrog(col, gm, h, 1, u[:, j:j + 1] if u.shape[1] > 1 else u)
-        out[j] = phi
+            for a in range(6):  # I + A + (A A) / 2
+                for b in range(6):
+                    s = 0.0
+                    for c in range(6):
+                        s += A[a, c] * A[c, b]
+                    step[a, b] = ((1.0 if a == b else 0.0) + A[a, b]) + s * 0.5
+            for a in range(6):  # phi <- step phi
+                for b in range(6):
+                    s = 0.0
+                    for c in range(6):
+                        s += step[a, c] * phi[c, b]
+                    product[a, b] = s
+            for a in range(6):  # (loops, not a slice assignment: that takes seconds to compile)
+                for b in range(6):
+                    phi[a, b] = product[a, b]
+            if steps > 1:  # (the numpy code's one-sub-step transition, its acceleration from the new r)
+                k = _gravity(r0, r1, r2, gm)
+                a0, a1, a2 = r0 * k + u0, r1 * k + u1, r2 * k + u2
+                r0, r1, r2, v0, v1, v2, a0, a1, a2 = _substep(r0, r1, r2, v0, v1, v2, a0, a1, a2, gm, h,
+                                                              u0, u1, u2)
     return out
 
 

@@ -28,8 +28,9 @@ def _draw(centres, C, m, U, z, log_det):
                 for t in range(CHUNK):
                     w[a, t] += c * zb[b, t]
         for a in range(n):  # [centres + C m; centres + C w] (C lower triangular)
-            mean_row[:] = 0.0
-            x_row[:] = 0.0
+            for t in range(CHUNK):  # (loops, not slice assignments: those take seconds to compile)
+                mean_row[t] = 0.0
+                x_row[t] = 0.0
             for b in range(a + 1):
                 c = C[a, b]
                 for t in range(CHUNK):
@@ -38,8 +39,9 @@ def _draw(centres, C, m, U, z, log_det):
             for t in range(size):
                 pair[a, start + t] = mean_row[t] + centres[a, start + t]
                 pair[n + a, start + t] = x_row[t] + centres[a, start + t]
-        zz[:] = 0.0
-        ww[:] = 0.0
+        for t in range(CHUNK):
+            zz[t] = 0.0
+            ww[t] = 0.0
         for a in range(n):  # (|z|^2 - |w|^2) / 2 + log det U
             for t in range(CHUNK):
                 zz[t] += zb[a, t] * zb[a, t]

@@ -23,5 +23,6 @@ def systematic_ancestors(weights: np.ndarray, uniform: float) -> np.ndarray:
         while filled < edge:
             ancestors[filled] = i
             filled += 1
-    ancestors[filled:] = n - 1  # (a uniform within rounding of 1 leaves the last point past N - 1)
+    for i in range(filled, n):  # a uniform within rounding of 1 leaves the last point past N - 1
+        ancestors[i] = n - 1
     return ancestors
