@@ -190,7 +190,7 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         """
         if self.metric != "cloud" or not rows.any():
             return super()._sample(x_pred, y, rows, dt)
-        mean, centres, D = shrink(x_pred, self._weights, self.kernel_bandwidth)
+        mean, centres, D = shrink(x_pred, *self._cloud_moments(), self.kernel_bandwidth)  # (x_pred is self._x)
         if dt > 0.0:
             D += self.model.process_noise(dt, self._pending_t)
         C = cholesky_or_none(D, symmetric=True) if np.isfinite(D).all() else None  # (its lower triangle)

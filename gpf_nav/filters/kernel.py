@@ -61,10 +61,11 @@ def paired_moments(x: np.ndarray, weights: np.ndarray, n: int
     return first_mean, second_mean, first, second
 
 
-def shrink(x: np.ndarray, weights: np.ndarray, bandwidth: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def shrink(x: np.ndarray, mean: np.ndarray, cov: np.ndarray, bandwidth: float
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Weighted mean ``m`` ``(n,)`` (the centres' too), kernel centres ``(n, N)`` and kernel covariance
-    ``h^2 P`` ``(n, n)`` of the cloud ``x`` ``(n, N)`` with normalised ``weights`` ``(N,)``."""
-    mean, cov = weighted_moments(x, weights)
+    ``h^2 P`` ``(n, n)`` of the cloud ``x`` ``(n, N)`` whose weighted mean and covariance are ``mean`` and
+    ``cov`` (:func:`weighted_moments`)."""
     a = math.sqrt(1.0 - bandwidth ** 2)
     centres = a * x
     centres += ((1.0 - a) * mean)[:, None]
@@ -97,4 +98,5 @@ def map_moments(x: np.ndarray, current_mean: np.ndarray, current: np.ndarray, me
     source, target = cholesky_or_none(current, symmetric=True), cholesky_or_none(cov, symmetric)
     if source is None or target is None:
         return None
-    return cloud.affine(x, current_mean, target @ triangular_inverse(source), np.asarray(mean, dtype=float))
+    return cloud.affine(x, current_mean, target @ triangular_inverse(source),  # (lower triangular)
+                        np.asarray(mean, dtype=float))

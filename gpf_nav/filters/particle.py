@@ -26,7 +26,7 @@ import numpy as np
 
 from gpf_nav import resampling as resamplers
 from gpf_nav.filters.interface import CLOUD, COSTATE, RESAMPLING, TEMPERING, Filter
-from gpf_nav.filters.kernel import match_moments, weighted_moments
+from gpf_nav.filters.kernel import map_moments, weighted_moments
 from gpf_nav.filters.projection import project
 from gpf_nav.linalg import cholesky_or_none, positive_definite, psd_sqrt
 from gpf_nav.models.state_space import StateSpaceModel
@@ -100,6 +100,7 @@ class ParticleFilter(Filter):
         self._x = np.zeros((n, self.n_particles))
         self._logw = np.full(self.n_particles, -np.log(self.n_particles))
         self._weights = np.full(self.n_particles, 1.0 / self.n_particles)
+        self._moments = None
         self._pending_dt = 0.0
         self._pending_t = 0.0
         self._sensor = self._own_sensor
@@ -145,13 +146,13 @@ class ParticleFilter(Filter):
 
     @property
     def mean(self):
-        return np.einsum("in,n->i", self._x, self._weights)  # not BLAS: see gpf_nav.blas
+        return self._cloud_mean().copy()
 
     @property
     def covariance(self):
         """Weighted covariance ``(n, n)`` of the cloud (plus the pending ``Q``), positive definite: a
         degenerate cloud gets the floor of :func:`~gpf_nav.linalg.positive_definite`."""
-        cov = weighted_moments(self._x, self._weights)[1]
+        cov = self._cloud_moments()[1]
         if self._pending_dt > 0.0:
             cov = cov + self.model.process_noise(self._pending_dt, self._pending_t)
         return positive_definite(cov)
@@ -162,8 +163,8 @@ class ParticleFilter(Filter):
         still pending from a ``predict`` is added on top; nothing changes when either covariance is
         singular."""
         self._require_initialized()
-        matched = match_moments(self._x, self._weights, np.asarray(mean, dtype=float),
-                                np.asarray(cov, dtype=float))
+        matched = map_moments(self._x, *self._cloud_moments(), np.asarray(mean, dtype=float),
+                              np.asarray(cov, dtype=float))
         if matched is not None:
             self._x = matched
 
@@ -287,15 +288,26 @@ class ParticleFilter(Filter):
 
     def _predicted_moments(self) -> tuple[np.ndarray, np.ndarray]:
         """Mean ``(n,)`` and covariance ``(n, n)`` of the predicted cloud, pending process noise included."""
-        cov = weighted_moments(self._x, self._weights)[1]
+        mean, cov = self._cloud_moments()
         if self._pending_dt > 0.0:
             cov = cov + self.model.process_noise(self._pending_dt, self._pending_t)
-        return self._cloud_mean(), cov
+        return mean, cov
 
     def _cloud_mean(self) -> np.ndarray:
         """Weighted mean ``(n,)`` of the cloud, in the filter's own state (:attr:`mean` may report the
         user's part of it only)."""
-        return np.einsum("in,n->i", self._x, self._weights)
+        return self._cloud_moments()[0]
+
+    def _cloud_moments(self) -> tuple[np.ndarray, np.ndarray]:
+        """Weighted mean ``(n,)`` and covariance ``(n, n)`` of the cloud, pending noise not included (read
+        only), kept until the particles or the weights change: both arrays are replaced, never written
+        in place (but by :meth:`_discard_non_finite`, which forgets the moments)."""
+        kept = self._moments
+        if kept is None or kept[0] is not self._x or kept[1] is not self._weights:
+            mean, cov = weighted_moments(self._x, self._weights)
+            mean.flags.writeable = cov.flags.writeable = False
+            kept = self._moments = (self._x, self._weights, mean, cov)
+        return kept[2], kept[3]
 
     def _constrain(self, basis: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> None:
         """Observability-constrained update: keep the prediction ``N(mean (n,), cov (n, n))`` along the
@@ -314,8 +326,8 @@ class ParticleFilter(Filter):
         scale = np.sqrt(np.maximum(cov.diagonal(), 1e-300))
         P_prior = cov / np.outer(scale, scale)
         m_prior = mean / scale
-        m_post, P_post = weighted_moments(self._x, self._weights)
-        m_post, P_post = m_post / scale, P_post / np.outer(scale, scale)
+        posterior = self._cloud_moments()
+        m_post, P_post = posterior[0] / scale, posterior[1] / np.outer(scale, scale)
         if basis.shape[1] >= n:
             m, P = m_prior, P_prior
         else:
@@ -330,7 +342,7 @@ class ParticleFilter(Filter):
             P = P_prior - B @ PV.T + B @ (V.T @ P_post @ V) @ B.T
         P = 0.5 * (P + P.T) * np.outer(scale, scale)
         if np.isfinite(P).all() and np.isfinite(m).all():
-            moved = match_moments(self._x, self._weights, m * scale, P, symmetric=True)
+            moved = map_moments(self._x, *posterior, m * scale, P, symmetric=True)
             if moved is not None:
                 self._x = moved
 
@@ -361,6 +373,7 @@ class ParticleFilter(Filter):
             self._recover("every particle became non-finite")
             return False
         self._x[:, bad] = self._x[:, np.flatnonzero(~bad)[0]][:, None]
+        self._moments = None
         logw = self._logw.copy()
         logw[bad] = -np.inf
         if self._normalise(logw) is None:

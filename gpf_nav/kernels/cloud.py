@@ -61,7 +61,7 @@ def _affine(x, centre, T, offset):
         for a in range(n):
             for t in range(CHUNK):  # (loops, not slice assignments: those take seconds to compile)
                 acc[t] = 0.0
-            for b in range(n):
+            for b in range(a + 1):  # T lower triangular
                 c = T[a, b]
                 for t in range(CHUNK):
                     acc[t] += c * d[b, t]
@@ -72,5 +72,6 @@ def _affine(x, centre, T, offset):
 
 def affine(x: np.ndarray, centre: np.ndarray, T: np.ndarray, offset: np.ndarray) -> np.ndarray:
     """``offset + T (x - centre)`` ``(n, N)`` of the cloud ``x`` ``(n, N)`` (C-contiguous), ``centre`` and
-    ``offset`` ``(n,)``, ``T`` ``(n, n)``; a new array."""
+    ``offset`` ``(n,)``, ``T`` ``(n, n)`` lower triangular (its upper triangle is not read); a new
+    array."""
     return _affine(x, centre, np.ascontiguousarray(T), offset)
