@@ -2,8 +2,6 @@
 operations as the filters and the lunar model ran before the kernels (at 200c859)."""
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from gpf_nav.linalg import cholesky_or_none, triangular_inverse

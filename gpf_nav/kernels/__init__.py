@@ -9,8 +9,8 @@ by the callers with numpy's ``Generator`` and passed in, so the streams stay tho
 once. A user's own model never goes through a kernel.
 
 The kernels are serial: on the 2-core machine they were measured on, shared with other work, numba's
-parallel loops (``prange``, OpenMP or workqueue threads) were 2 to 8 times slower than the serial loops
-at N = 100 000.
+parallel loops (``prange`` over blocks of particles, OpenMP or workqueue threads) were never faster than
+the serial loops at N = 100 000, and up to 8 times slower.
 """
 
 CHUNK = 256
