@@ -27,23 +27,6 @@ def match_moments(x, weights, mean, cov):
     return (target @ triangular_inverse(source)) @ (x - m_x[:, None]) + mean[:, None]
 
 
-def draw(centres, C, m, U, z, log_det):
-    """The GPF's cloud-proposal draw (gpf.py ``_sample``): ``(pair (2 n, N), correction (N,))``."""
-    n = centres.shape[0]
-    w = U @ z
-    w += m
-    pair = np.empty((2 * n, centres.shape[1]))
-    np.matmul(C, m, out=pair[:n])
-    pair[:n] += centres
-    np.matmul(C, w, out=pair[n:])
-    pair[n:] += centres
-    correction = np.einsum("kn,kn->n", z, z)
-    correction -= np.einsum("kn,kn->n", w, w)
-    correction *= 0.5
-    correction += log_det
-    return pair, correction
-
-
 def systematic(weights, uniform):
     n = weights.size
     cdf = np.cumsum(weights)

@@ -14,7 +14,7 @@ import numpy_reference as reference
 from gpf_nav import resampling
 from gpf_nav.filters import BootstrapPF, GeometricProjectionPF, MultipleModelGPF
 from gpf_nav.filters.kernel import match_moments
-from gpf_nav.kernels import cloud, orbit, proposal
+from gpf_nav.kernels import cloud, orbit
 from gpf_nav.kernels.systematic import systematic_ancestors
 from gpf_nav.models.compensation import ModelErrorCompensation
 from gpf_nav.models.lunar import MU_MOON, LunarDescentModel
@@ -48,7 +48,7 @@ def _close(got, expected, rtol=RTOL, atol=0.0):
 
 
 @pytest.mark.parametrize("count", SIZES)
-def test_moments_and_affine_map_are_the_numpy_ones(count):
+def test_moments_and_the_moment_map_are_the_numpy_ones(count):
     rng = np.random.default_rng(count)
     x, w = _cloud(rng, 9, count)
     mean, cov = cloud.moments(x, w)
@@ -63,20 +63,6 @@ def test_moments_and_affine_map_are_the_numpy_ones(count):
         target_cov = A @ A.T + np.eye(9)
         _close(match_moments(x, w, target, target_cov), reference.match_moments(x, w, target, target_cov),
                atol=1e-9 * np.abs(target).max())
-
-
-@pytest.mark.parametrize("count", SIZES)
-def test_proposal_draw_is_the_numpy_one(count):
-    rng = np.random.default_rng(10 + count)
-    n = 9
-    centres, _ = _cloud(rng, n, count)
-    C = np.tril(rng.standard_normal((n, n)))
-    U = np.triu(rng.standard_normal((n, n)))
-    m, z = rng.standard_normal((n, count)), rng.standard_normal((n, count))
-    pair, correction = proposal.draw(centres, np.asfortranarray(C), m, U, z, 0.7)
-    expected_pair, expected_correction = reference.draw(centres, C, m, U, z, 0.7)
-    _close(pair, expected_pair, atol=1e-12 * np.abs(centres).max())
-    _close(correction, expected_correction, atol=1e-12 * np.abs(expected_correction).max())
 
 
 @pytest.mark.parametrize("count", SIZES)

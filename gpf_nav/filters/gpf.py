@@ -43,7 +43,6 @@ from gpf_nav.filters.kernel import default_bandwidth, map_moments, match_moments
 from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
 from gpf_nav.filters.particle import ParticleFilter, gaussian_shift_correction, select_rows
 from gpf_nav.filters.projection import project
-from gpf_nav.kernels import proposal
 from gpf_nav.linalg import cholesky_or_none, triangular_inverse
 from gpf_nav.models.state_space import StateSpaceModel
 
@@ -229,17 +228,25 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         R = cholesky_or_none(M, symmetric=True)  # never None: M >= I, and the check of S bounds G G^T / eps
         U = triangular_inverse(R).T  # (n, n)
         z = antithetic_normals(self.rng, n, self.n_particles)
-        # [proposal means; x] (weighed together after the update) and, with w = m + U z, the exact
-        # weight's log N(x; centre, D) - log q(x) = (|z|^2 - |w|^2) / 2 + log det U (x - centre = C w,
-        # and x - proposal mean = C U z)
-        pair, correction = proposal.draw(centres, C, B.T @ white_r, U, z,
-                                         -sum(map(math.log, R.diagonal().tolist())))
+        m = B.T @ white_r  # (n, N)
+        w = U @ z
+        w += m
+        pair = np.empty((2 * n, self.n_particles))  # [proposal means; x]: weighed together after the update
+        proposal_means = np.matmul(C, m, out=pair[:n])
+        proposal_means += centres
+        x = np.matmul(C, w, out=pair[n:])
+        x += centres
         if self.moment_matching:
             spread = C @ U  # (I - K H) D = C U (C U)^T
             self._proposal = (pair, spread @ spread.T)
-        x = pair[n:]
         if self.weighting == "likelihood":
             return x, 0.0, used
+        # log N(x; centre, D) - log q(x) = (|z|^2 - |w|^2) / 2 + log det U (x - centre = C w, and
+        # x - proposal mean = C U z)
+        correction = np.einsum("kn,kn->n", z, z)
+        correction -= np.einsum("kn,kn->n", w, w)
+        correction *= 0.5
+        correction -= sum(map(math.log, R.diagonal().tolist()))  # log det U
         return x, correction, used
 
     def _whitened(self, H: np.ndarray, r: np.ndarray, rows: np.ndarray, C: np.ndarray

@@ -98,5 +98,6 @@ def map_moments(x: np.ndarray, current_mean: np.ndarray, current: np.ndarray, me
     source, target = cholesky_or_none(current, symmetric=True), cholesky_or_none(cov, symmetric)
     if source is None or target is None:
         return None
-    return cloud.affine(x, current_mean, target @ triangular_inverse(source),  # (lower triangular)
-                        np.asarray(mean, dtype=float))
+    out = (target @ triangular_inverse(source)) @ (x - current_mean[:, None])  # (BLAS: faster than a kernel)
+    out += np.asarray(mean, dtype=float)[:, None]
+    return out
