@@ -119,11 +119,3 @@ def push(moved, frame, a, driven, integrated, velocity_gain, position_gain):
     if integrated.size:
         moved[integrated] += pushed * position_gain
     return moved
-
-
-def range_azimuth_elevation(x, station):
-    """The lunar model's measurement ``(N, 3)`` of ``x`` ``(N, 6)``."""
-    d = x.T[:3] - station[:, None]
-    h2 = d[0] * d[0] + d[1] * d[1]
-    rho2 = h2 + d[2] * d[2]
-    return np.stack([np.sqrt(rho2), np.arctan2(d[1], d[0]), np.arctan2(d[2], np.sqrt(h2))]).T

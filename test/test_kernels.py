@@ -106,18 +106,6 @@ def test_orbit_frames_and_push_are_the_numpy_ones(count):
     _close(moved, expected, atol=1e-15)
 
 
-@pytest.mark.parametrize("count", SIZES)
-def test_lunar_measurement_is_the_numpy_one(count):
-    rng = np.random.default_rng(45 + count)
-    x = _orbits(rng, count)
-    station = np.array([1.7e6, -2e3, 5e2])
-    for model in (LunarDescentModel(), LunarDescentModel(station=station)):
-        _close(model.measure(x.T), reference.range_azimuth_elevation(x.T, model.station), rtol=1e-15, atol=1e-15)
-    compensated = np.vstack([x, rng.standard_normal((3, count))])  # the compensated model's (9, N) states
-    _close(ModelErrorCompensation(LunarDescentModel(), 1e6, 0.1).measure(compensated.T),
-           reference.range_azimuth_elevation(x.T, np.zeros(3)), rtol=1e-15, atol=1e-15)
-
-
 def test_compensated_lunar_transition_is_the_numpy_one():
     rng = np.random.default_rng(50)
     model = ModelErrorCompensation(LunarDescentModel(), 1e6, 0.1)

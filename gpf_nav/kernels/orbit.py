@@ -1,6 +1,5 @@
-"""The lunar model's inner loops: two-body leapfrog flow and its Jacobian, orbit frames, an acceleration
-given in those frames pushed onto the velocities and positions (the compensated transition), and the
-range, azimuth and elevation measurement.
+"""The lunar model's inner loops: two-body leapfrog flow and its Jacobian, orbit frames, and an
+acceleration given in those frames pushed onto the velocities and positions (the compensated transition).
 
 States are particle-last: ``x`` ``(6, N)`` with rows ``r`` (0:3) and ``v`` (3:6); the specific force ``u``
 is ``(3, K)`` with ``K`` 1 (one input for every particle) or ``N``. The arithmetic is the numpy code's,
@@ -167,18 +166,3 @@ def push(moved: np.ndarray, frame: np.ndarray, a: np.ndarray, driven: np.ndarray
             moved[driven[i], j] += s * velocity_gain
             if integrated.size:
                 moved[integrated[i], j] += s * position_gain
-
-
-@njit(cache=True, error_model="numpy")
-def range_azimuth_elevation(x: np.ndarray, station: np.ndarray) -> np.ndarray:
-    """Range, azimuth ``atan2(dy, dx)`` and elevation ``atan2(dz, |(dx, dy)|)`` ``(3, N)`` of the lines of
-    sight ``d = r - station`` of the states ``x`` ``(6, N)`` (positions in rows 0:3), ``station`` ``(3,)``."""
-    out = np.empty((3, x.shape[1]))
-    s0, s1, s2 = station[0], station[1], station[2]
-    for j in range(x.shape[1]):
-        d0, d1, d2 = x[0, j] - s0, x[1, j] - s1, x[2, j] - s2
-        h2 = d0 * d0 + d1 * d1
-        out[0, j] = math.sqrt(h2 + d2 * d2)
-        out[1, j] = math.atan2(d1, d0)
-        out[2, j] = math.atan2(d2, math.sqrt(h2))
-    return out

@@ -120,10 +120,11 @@ class LunarDescentModel(StateSpaceModel):
         rho2 = h2 + d[2] * d[2]
         return d, np.sqrt(h2), np.sqrt(rho2)
 
+    def _measure(self, d, horizontal, rho):
+        return np.stack([rho, np.arctan2(d[1], d[0]), np.arctan2(d[2], horizontal)]).T
+
     def measure(self, x):
-        """Range, azimuth, elevation ``(N, 3)`` (:func:`gpf_nav.kernels.orbit.range_azimuth_elevation`), built
-        particle-last."""
-        return orbit.range_azimuth_elevation(_particle_last(x), self.station).T
+        return self._measure(*self._line_of_sight(x))
 
     def measurement_jacobian(self, x):
         if x.shape[0] == 1:  # one point (the GPF linearises at its cloud's mean)
@@ -131,7 +132,8 @@ class LunarDescentModel(StateSpaceModel):
         return self._jacobian(*self._line_of_sight(x))
 
     def measure_and_jacobian(self, x):
-        return self.measure(x), self._jacobian(*self._line_of_sight(x))
+        los = self._line_of_sight(x)
+        return self._measure(*los), self._jacobian(*los)
 
     def _jacobian(self, d, horizontal, rho):
         hor = np.maximum(horizontal, _MIN_HORIZONTAL)
