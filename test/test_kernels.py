@@ -57,6 +57,8 @@ def test_moments_and_the_moment_map_are_the_numpy_ones(count):
     scale = np.sqrt(np.outer(np.diag(expected_cov), np.diag(expected_cov)))
     _close(cov / np.where(scale > 0, scale, 1.0), expected_cov / np.where(scale > 0, scale, 1.0), atol=1e-12)
     np.testing.assert_array_equal(cov, cov.T)
+    # the mean alone is the same number (a filter reads it with or without the covariance)
+    np.testing.assert_array_equal(cloud.weighted_mean(x, w), mean)
     if count >= 9:
         target = rng.standard_normal(9)
         A = rng.standard_normal((9, 9))

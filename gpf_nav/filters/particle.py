@@ -27,6 +27,7 @@ import numpy as np
 from gpf_nav import resampling as resamplers
 from gpf_nav.filters.interface import CLOUD, COSTATE, RESAMPLING, TEMPERING, Filter
 from gpf_nav.filters.kernel import map_moments, weighted_moments
+from gpf_nav.kernels import cloud
 from gpf_nav.filters.projection import project
 from gpf_nav.linalg import cholesky_or_none, positive_definite, psd_sqrt
 from gpf_nav.models.state_space import StateSpaceModel
@@ -295,8 +296,12 @@ class ParticleFilter(Filter):
 
     def _cloud_mean(self) -> np.ndarray:
         """Weighted mean ``(n,)`` of the cloud, in the filter's own state (:attr:`mean` may report the
-        user's part of it only)."""
-        return self._cloud_moments()[0]
+        user's part of it only): the kept one, or a pass over the cloud that does not form the covariance
+        (a filter that never reads the covariance does not pay for it), the same number either way."""
+        kept = self._moments
+        if kept is not None and kept[0] is self._x and kept[1] is self._weights:
+            return kept[2]
+        return cloud.weighted_mean(self._x, self._weights)  # the kept one's arithmetic
 
     def _cloud_moments(self) -> tuple[np.ndarray, np.ndarray]:
         """Weighted mean ``(n,)`` and covariance ``(n, n)`` of the cloud, pending noise not included (read
