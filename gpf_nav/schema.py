@@ -188,13 +188,13 @@ def params_file(specs: list[Spec], node: str, header: list[str]) -> str:
 
 
 def markdown_table(specs: list[Spec]) -> str:
-    """The reference table of ``specs``, one Markdown table per group."""
-    out, group = [], object()
+    """The reference table of ``specs``: one Markdown table, a bold row opening each group."""
+    out, group = ["| name | type | default | allowed | unit | description |", "|---|---|---|---|---|---|"], object()
     for spec in specs:
         if spec.group != group:
             group = spec.group
-            out += ["", f"**{group}**" if group else "", "",
-                    "| name | type | default | allowed | unit | description |", "|---|---|---|---|---|---|"]
+            if group:
+                out.append(f"| **{group}** | | | | | |")
         allowed = " \\| ".join(spec.choices) if spec.choices else spec.bounds
         if spec.live:
             allowed = f"{allowed} (live)" if allowed else "(live)"
@@ -202,4 +202,4 @@ def markdown_table(specs: list[Spec]) -> str:
         description = spec.description + (f" Checked by `{spec.checked_by}`." if spec.checked_by else "")
         description = description.replace("|", r"\|")
         out.append(f"| `{spec.name}` | {spec.type_name} | `{default}` | {allowed} | {spec.unit} | {description} |")
-    return "\n".join(out).lstrip("\n") + "\n"
+    return "\n".join(out) + "\n"
