@@ -18,17 +18,13 @@ from gpf_nav.sensors.sensor import Padded, Sensor
 from gpf_nav.sensors.model import ModelSensor
 
 
-class BiasedSensor(Sensor):
+class BiasedSensor(Padded):
     """``sensor`` on the augmented state: ``h(x[:, :n]) + x[:, columns]`` on its ``components``."""
 
     def __init__(self, sensor: Sensor, n: int, total: int, columns: np.ndarray, components: np.ndarray):
-        self.sensor = sensor
-        self.name, self.dim, self.angular, self.bias = sensor.name, sensor.dim, sensor.angular, None
-        self.orthogonal_jacobian_rows = sensor.orthogonal_jacobian_rows  # unit columns of their own
-        self._n, self._total = int(n), int(total)
+        super().__init__(sensor, n, total)
         self._columns, self._components = columns, components
-        index = tuple(range(n)) if sensor.measured_state_index is None else tuple(sensor.measured_state_index)
-        self.measured_state_index = index + tuple(int(c) for c in columns)
+        self.measured_state_index = self.measured_state_index + tuple(int(c) for c in columns)
 
     def _add(self, h: np.ndarray, x: np.ndarray) -> np.ndarray:
         h = np.array(h, dtype=float)
@@ -36,29 +32,16 @@ class BiasedSensor(Sensor):
         return h
 
     def measure(self, x, t=0.0):
-        return self._add(self.sensor.measure(x[:, :self._n], t), x)
-
-    def jacobian(self, x, t=0.0):
-        return self._pad(self.sensor.jacobian(x[:, :self._n], t))
+        return self._add(super().measure(x, t), x)
 
     def measure_and_jacobian(self, x, t=0.0):
-        h, H = self.sensor.measure_and_jacobian(x[:, :self._n], t)
-        return self._add(h, x), self._pad(H)
+        h, H = super().measure_and_jacobian(x, t)
+        return self._add(h, x), H
 
     def _pad(self, H: np.ndarray) -> np.ndarray:
-        out = np.zeros((H.shape[0], H.shape[1], self._total))
-        out[:, :, :self._n] = H
+        out = super()._pad(H)
         out[:, self._components, self._columns] = 1.0
         return out
-
-    def noise(self, t=0.0):
-        return self.sensor.noise(t)
-
-    def residual(self, y, h):
-        return self.sensor.residual(y, h)
-
-    def measurement_mean(self, y, weights):
-        return self.sensor.measurement_mean(y, weights)
 
 
 class SensorBiasModel(StateSpaceModel):
