@@ -224,3 +224,46 @@ def test_the_estimator_diagnostics_warn_while_a_direction_is_undetermined(case, 
     else:
         assert "undetermined" not in message and level == diag.OK, message
         assert kv["observability"] == "UNDETERMINED" and float(kv["observability elapsed [s]"]) < 100.0
+
+
+@pytest.mark.parametrize("name", ["gpf", "ekf"])
+def test_the_estimator_diagnostics_warn_when_the_innovations_outgrow_the_covariance(name):
+    """The engine behind the node (no DDS) runs the consistency monitor on every accepted measurement:
+    on a consistent stream its FAULTs stay at its rate and ``/diagnostics`` does not name it; started
+    with a covariance 1000 times too small (a 1 m / 1 mm/s prior while the truth is kilometres away) it
+    raises a FAULT within a few updates, the status is WARN with the monitor as the cause, and held
+    ``monitor_hold`` s; ``consistency_enabled: false`` (``consistency=None``) turns it off."""
+    from gpf_nav.estimator.engine import EngineConfig, EstimatorEngine
+    from gpf_nav.ros import diagnostics as diag
+
+    scenario = generate(ScenarioConfig(epsilon=0.0, duration=200.0), 0)
+    model = filter_model(scenario.config)
+    clock = [0.0]
+
+    def run(initial_std, **config):
+        cfg = EngineConfig(initial_state=scenario.prior_mean, initial_std=initial_std,
+                           initial_stamp=scenario.start_time, monitor_hold=5.0, **config)
+        engine = EstimatorEngine(lambda: make_filter(name, model, n_particles=200, seed=1), model, cfg,
+                                 lambda: clock[0])
+        for k in range(scenario.times.size):
+            engine.measurement(int(round(scenario.times[k] * 1e9)), scenario.measurements[k], None)
+        return engine, *diag.filter_status(engine, None, diag.Thresholds(costate_warn=1e12), name)
+
+    engine, level, message, values = run(np.sqrt(np.diag(scenario.prior_cov)))
+    kv = dict(values)
+    assert int(kv["consistency updates"]) == scenario.times.size
+    assert int(kv["consistency fault updates"]) <= 2 and "consistency" not in message, message
+    assert kv["consistency level"] == "OK" and 0.0 < float(kv["consistency p-value"]) <= 1.0
+
+    engine, level, message, values = run(np.array([1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3]))
+    kv = dict(values)
+    assert int(kv["consistency fault updates"]) >= 3
+    first = engine.consistency.status
+    assert level >= diag.WARN and "consistency FAULT" in message, message
+    assert kv["consistency level"] == "FAULT" and float(kv["consistency window statistic"]) > 0.0
+    clock[0] += 10.0  # held 5 s on the steady clock: the last update's own level shows again after that
+    level, message, values = diag.filter_status(engine, None, diag.Thresholds(costate_warn=1e12), name)
+    assert dict(values)["consistency level"] == first.level
+
+    engine, level, message, values = run(np.array([1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3]), consistency=None)
+    assert dict(values)["consistency level"] == "disabled" and "consistency" not in message

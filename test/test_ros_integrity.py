@@ -252,6 +252,8 @@ def test_range_bias_raises_error_with_the_monitor_as_cause_over_dds(ros):
         assert status.level != ERROR, status.message
     assert ready_levels.count("OK") >= 0.8 * len(ready_levels)
     assert float(values["integrity p-value"]) > 1e-3 and values["integrity components"] == "range, azimuth, elevation"
+    # the consistency monitor beside it: every measurement tested, at most its rate of FAULTs
+    assert values["consistency updates"] == str(n_clean) and int(values["consistency fault updates"]) <= 1
 
     # sudden +3 km range bias from measurement n_clean on
     for k in range(n_clean, n_clean + 4):
@@ -262,6 +264,8 @@ def test_range_bias_raises_error_with_the_monitor_as_cause_over_dds(ros):
     assert values["reinitializations"] == "0" and int(values["integrity fault updates"]) >= 4
     assert float(values["integrity statistic"]) > float(values["integrity threshold"])
     assert float(values["integrity p-value"]) < 1e-3
+    # 100 range sigmas: the innovations are far larger than the covariance allows, named as a cause too
+    assert values["consistency level"] == "FAULT" and "consistency FAULT" in status.message
 
     # ~/reset: the monitor forgets its samples and its alarm
     client = ros.node.create_client(Trigger, "/gpf_estimator/reset")

@@ -48,10 +48,10 @@ from scipy.stats import chi2
 
 from gpf_nav.filters import SensorBiasFilter
 from gpf_nav.filters.interface import COMPENSATION, COSTATE, GATE, MODEL_PROBABILITIES, RESAMPLING, TEMPERING
-from gpf_nav.integrity import CostateMonitor, IntegrityStatus
+from gpf_nav.integrity import ConsistencyMonitor, ConsistencyStatus, CostateMonitor, IntegrityStatus, innovation_moments
 from gpf_nav.estimator.history import Entry, History
 from gpf_nav.estimator.initialization import batch_initial_state
-from gpf_nav.sensors import innovation_distance
+from gpf_nav.sensors import ModelSensor, innovation_distance
 from gpf_nav.estimator.input_checks import Counters, RateLimiter, check_timing
 
 NS = 1_000_000_000
@@ -76,6 +76,7 @@ class EngineConfig:
     reinit_hold: float = 10.0               # s (steady clock) the ERROR level is held after it
     monitor: dict | None = field(default_factory=dict)  # CostateMonitor keyword arguments; None: disabled
     monitor_hold: float = 5.0               # s (steady clock) a monitor WARN/FAULT stays reported; < 0: until reset
+    consistency: dict | None = field(default_factory=dict)  # ConsistencyMonitor keyword arguments; None: disabled
     history_length: float = 10.0            # s, late measurements within this are fused at their stamp; 0: none
     gates: dict = field(default_factory=dict)  # stream -> chi-square probability of its innovation gate; 0: off
     gate_limit: int = 5                     # after this many gate refusals in a row the next one is used
@@ -115,6 +116,31 @@ class IntegrityReport:
     error: str = ""
 
 
+@dataclass(frozen=True)
+class ConsistencyReport:
+    """What :meth:`EstimatorEngine.consistency_report` says about the consistency monitor
+    (:mod:`gpf_nav.integrity.consistency`).
+
+    Attributes:
+        level: ``"OK"``, ``"WARN"`` or ``"FAULT"``: the last update's, or ``"FAULT"`` while an alarm is held
+            (``monitor_hold``).
+        status: the monitor's last :class:`ConsistencyStatus`.
+        alarm: the held FAULT's status (None when ``level`` is the last update's) and ``alarm_age`` [s].
+        updates, rejected: updates tested and updates that could not be (since the last reset).
+        fault_updates: updates at FAULT since start-up (cumulative).
+        error: the last exception the monitor raised ("" if none; the monitor is then reset).
+    """
+
+    level: str
+    status: ConsistencyStatus
+    alarm: ConsistencyStatus | None
+    alarm_age: float
+    updates: int
+    rejected: int
+    fault_updates: int
+    error: str
+
+
 @lru_cache(maxsize=64)
 def _chi2_threshold(probability: float, dof: int) -> float:
     return float(chi2.ppf(probability, dof))
@@ -146,6 +172,10 @@ class EstimatorEngine:
         self.integrity_warn_updates = 0
         self.integrity_resets = 0
         self.integrity_error = ""
+        self.consistency = ConsistencyMonitor(**config.consistency) if config.consistency is not None else None
+        self.consistency_fault_updates = 0    # cumulative
+        self.consistency_error = ""
+        self._model_sensor = ModelSensor(model)
         self.reset()
 
     # --- state -----------------------------------------------------------------------------------------
@@ -174,6 +204,7 @@ class EstimatorEngine:
         self.init_source = ""
         self._last_dt = 0.0
         self._reset_monitor()
+        self._consistency_alarm: tuple[float, ConsistencyStatus] | None = None
         cfg = self.config
         if cfg.initial_state is not None and cfg.initial_stamp >= 0.0:
             self._initialize(cfg.initial_state, np.diag(cfg.initial_std ** 2),
@@ -288,6 +319,8 @@ class EstimatorEngine:
             self._predict_to(stamp_ns)
             gated = self._gated(stream, sensor, y)
             if not gated:
+                if feed_monitor:
+                    self._test_consistency(y, sensor)
                 if sensor is None:
                     self.filter.update(y)
                 else:
@@ -517,6 +550,8 @@ class EstimatorEngine:
 
     # --- integrity -------------------------------------------------------------------------------------
     def _reset_monitor(self) -> None:
+        if self.consistency is not None:
+            self.consistency.reset()
         if self.monitor is None:
             return
         if self.monitor.samples or getattr(self, "_skipped", 0):
@@ -546,6 +581,42 @@ class EstimatorEngine:
             self.integrity_warn_updates += 1
         if status.level != "OK":
             self._alarms[status.level] = (self.monotonic(), status)
+
+    def _test_consistency(self, y: np.ndarray, sensor) -> None:
+        """Give the consistency monitor the innovation of ``y`` against the predicted estimate (never
+        raises): the filter's covariance too small for what the measurements show is a FAULT."""
+        if self.consistency is None:
+            return
+        try:
+            if isinstance(self.filter, SensorBiasFilter) and sensor is not None:
+                sensor, mean, cov = self.filter.predicted_estimate(sensor)
+            else:
+                mean, cov = self.filter.mean, self.filter.covariance
+            r, S = innovation_moments(sensor if sensor is not None else self._model_sensor, y, mean, cov,
+                                      self.filter.time)
+            status = self.consistency.update(r, S)
+        except Exception as err:  # noqa: BLE001 - a monitor failure must not stop the update
+            self.consistency_error = f"{type(err).__name__}: {err}"
+            self.consistency.reset()
+            return
+        if status.level == "FAULT":
+            self.consistency_fault_updates += 1
+            self._consistency_alarm = (self.monotonic(), status)
+
+    def consistency_report(self) -> ConsistencyReport | None:
+        """The consistency monitor's state for the diagnostics (None when disabled)."""
+        m = self.consistency
+        if m is None:
+            return None
+        alarm, age = None, 0.0
+        if self._consistency_alarm is not None and m.status.level != "FAULT":
+            t, held = self._consistency_alarm
+            age = self.monotonic() - t
+            if self.config.monitor_hold < 0 or age < self.config.monitor_hold:
+                alarm = held
+        level = "FAULT" if alarm is not None else m.status.level
+        return ConsistencyReport(level, m.status, alarm, age, m.updates, m.rejected,
+                                 self.consistency_fault_updates, self.consistency_error)
 
     def observability(self):
         """The filter's :class:`~gpf_nav.integrity.observability.ObservabilityReport` (None before the

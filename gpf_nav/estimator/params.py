@@ -111,7 +111,13 @@ ESTIMATOR = [
         Spec("monitor_false_alarm_rate", 1e-3, "Per-update probability of FAULT (diagnostics ERROR) on a consistent filter.", bounds="(0, 1)"),
         Spec("monitor_warn_false_alarm_rate", 1e-2, "Per-update probability of WARN or worse on a consistent filter; >= monitor_false_alarm_rate.", bounds="(0, 1)"),
         Spec("monitor_quarantine_rate", -1.0, "p-value below which a window is kept out of the reference; negative: monitor_false_alarm_rate / 100; 0: no quarantine; at most monitor_false_alarm_rate.", bounds="finite"),
-        Spec("monitor_hold", 5.0, "A monitor WARN or FAULT stays in /diagnostics this long after the update that raised it (steady clock); negative: latched until ~/reset or a re-initialisation.", "s", "finite"),
+        Spec("monitor_hold", 5.0, "A monitor WARN or FAULT (co-state or consistency) stays in /diagnostics this long after the update that raised it (steady clock); negative: latched until ~/reset or a re-initialisation.", "s", "finite"),
+    ),
+    *_group(
+        "Consistency monitor (normalised innovations; every filter)",
+        Spec("consistency_enabled", True, "Test the innovations of the model's and the sensors' measurements against the predicted covariance: WARN in /diagnostics when they are too large for it (an overconfident estimate)."),
+        Spec("consistency_window", 10, "Updates whose normalised innovations squared are summed.", bounds=">= 1"),
+        Spec("consistency_false_alarm_rate", 1e-3, "Per-update probability of a consistency FAULT (diagnostics WARN) on a consistent filter.", bounds="(0, 1)"),
     ),
     *_group(
         "Node only (gpf-nav replay accepts and ignores them): lifecycle and TF",

@@ -10,7 +10,8 @@ and the thresholds; :func:`to_msg` turns that into ``diagnostic_msgs/DiagnosticA
   integrity monitor at WARN (held ``monitor_hold`` s); or, from :data:`OBSERVABILITY_WARN_AFTER` s after
   the prior, a direction of the state the measurements have not determined (the observability report,
   :mod:`gpf_nav.integrity.observability`: along it the estimate is the prior's, whatever the
-  covariance's size);
+  covariance's size); or the consistency monitor at FAULT (held ``monitor_hold`` s: the innovations are
+  larger than the published covariance allows, :mod:`gpf_nav.integrity.consistency`);
 * OK otherwise.
 
 The message names every cause (``filter re-initialised (...)``, ``integrity FAULT: ...``), so an ERROR
@@ -88,6 +89,13 @@ def filter_status(engine, now_ns: int | None, thresholds: Thresholds, filter_nam
         problems.append(f"{observability.undetermined} undetermined direction"
                         f"{'s' if observability.undetermined > 1 else ''}: "
                         + "; ".join(observability.describe(state_names(observability.information.size))))
+    consistency = engine.consistency_report() if hasattr(engine, "consistency_report") else None
+    if consistency is not None and consistency.level == "FAULT":
+        level = max(level, WARN)
+        s = consistency.alarm if consistency.alarm is not None else consistency.status
+        when = f" {consistency.alarm_age:.1f} s ago" if consistency.alarm is not None else ""
+        problems.append(f"consistency FAULT{when}: innovations too large for the covariance (NIS sum "
+                        f"{s.statistic:.4g} over {s.dof} components, p = {s.p_value:.2g})")
     message = "; ".join(problems) if problems else "tracking"
 
     measurements = MEASUREMENT_STREAMS
@@ -122,7 +130,26 @@ def filter_status(engine, now_ns: int | None, thresholds: Thresholds, filter_nam
     if report is not None:
         values.extend(integrity_values(report, filter_name))
     values.extend(observability_values(observability))
+    values.extend(consistency_values(consistency))
     return level, message, values
+
+
+def consistency_values(report) -> list[tuple[str, str]]:
+    """The ``consistency ...`` key/values of an :class:`gpf_nav.estimator.engine.ConsistencyReport`
+    (None: disabled)."""
+    if report is None:
+        return [("consistency level", "disabled")]
+    s = report.status
+    tested = s.dof > 0
+    return [("consistency level", report.level),
+            ("consistency NIS", _fmt(s.nis) if math.isfinite(s.nis) else "n/a"),
+            ("consistency window statistic", _fmt(s.statistic) if tested else "n/a"),
+            ("consistency window dof", str(s.dof)),
+            ("consistency p-value", _fmt(s.p_value) if tested else "n/a"),
+            ("consistency updates", str(report.updates)),
+            ("consistency rejected", str(report.rejected)),
+            ("consistency fault updates", str(report.fault_updates)),
+            ("consistency error", report.error or "none")]
 
 
 OBSERVABILITY_WARN_AFTER = 100.0

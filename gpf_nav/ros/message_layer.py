@@ -37,6 +37,7 @@ from gpf_nav.estimator.params import ParameterError, check_estimator_parameters,
 from gpf_nav.estimator.sensor_setup import build_sensors, gates, with_biases
 from gpf_nav.estimator.streams import STREAMS, Stream
 from gpf_nav.filters.interface import CLOUD
+from gpf_nav.integrity.consistency import WARN_FALSE_ALARM_RATE
 from gpf_nav.ros.stream_messages import MESSAGE_TYPES
 
 LOG_THROTTLE = 5.0  # s (wall clock) between two log lines about the same refusal reason
@@ -69,6 +70,16 @@ def monitor_options(p: dict) -> dict | None:
                 false_alarm_rate=p["monitor_false_alarm_rate"],
                 warn_false_alarm_rate=p["monitor_warn_false_alarm_rate"],
                 quarantine_rate=None if p["monitor_quarantine_rate"] < 0 else p["monitor_quarantine_rate"])
+
+
+def consistency_options(p: dict) -> dict | None:
+    """``ConsistencyMonitor`` keyword arguments from the node parameters (None when disabled); its WARN
+    level is not reported, so its rate only has to be valid."""
+    if not p["consistency_enabled"]:
+        return None
+    rate = p["consistency_false_alarm_rate"]
+    return dict(window=p["consistency_window"], false_alarm_rate=rate,
+                warn_false_alarm_rate=max(rate, WARN_FALSE_ALARM_RATE))
 
 
 class MessageLayer:
@@ -110,6 +121,7 @@ class MessageLayer:
             initial_std=np.array(p["initial_std"]), initial_stamp=p["initial_stamp"],
             max_measurement_rate=p["max_measurement_rate"], max_extrapolation=p["max_extrapolation"],
             reinit_hold=p["reinit_hold"], monitor=monitor_options(p), monitor_hold=p["monitor_hold"],
+            consistency=consistency_options(p),
             history_length=p["history_length"], gates=gates(p, STREAMS), gate_limit=p["gate_limit"])
         self.engine = EstimatorEngine(factory, self.model, config, monotonic=monotonic)
         self.thresholds = diag.Thresholds(ess_warn=p["ess_warn_threshold"],
