@@ -170,12 +170,12 @@ for _entry in (
                 GPF_OPTIONS | {"nominal_prior"}, node=True,
                 description="one navigation-grade GPF on the compensated model, averaged with the nominal "
                             "hypothesis by Savage-Dickey (the default before the multiple model)"),
-    FilterEntry("gpf-mean", "GPF navigation, mean-linearised update",
+    FilterEntry("gpf-flat", "GPF navigation, flattened update",
                 lambda model, n_particles, seed, **options: _gpf(
-                    model, n_particles, seed, **{"linearization": "mean", **options}),
+                    model, n_particles, seed, **{"linearization": "flattened", **options}),
                 "gpf", GPF_OPTIONS | {"switch_time"},
-                description="gpf with the update linearised once at the cloud's mean, in the state's own "
-                            "coordinates, and the kernel 1.6 times wider (the default before issue 23)"),
+                description="gpf with both members updating in the flattened coordinates of their "
+                            "measurement (linearization flattened)"),
     FilterEntry("gpf-qmetric", "GPF Q-metric (innovation, corrected, eps=1)",
                 _gpf_variant(reference="innovation", weighting="corrected", metric="process_noise",
                              regularization=1.0, unmodelled_acceleration_std=0.0), "gpf", GPF_OPTIONS,

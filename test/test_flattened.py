@@ -25,7 +25,7 @@ def test_the_flattened_update_is_the_update_itself_for_a_linear_measurement():
     clouds = []
     for linearization in ("mean", "flattened"):
         flt = GeometricProjectionPF(model, 200, seed=1, unmodelled_acceleration_std=0.0,
-                                    linearization=linearization, kernel_bandwidth=0.5)  # (same kernel)
+                                    linearization=linearization)
         flt.initialize(np.array([0.0, 1.0, 3.0]), np.diag([4.0, 1.0, 4.0]))
         for y in ys:
             flt.predict(0.5)

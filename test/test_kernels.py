@@ -119,9 +119,9 @@ def test_compensated_lunar_transition_is_the_numpy_one():
     _close(model.transition(np.ascontiguousarray(x).T, 2.0), np.vstack([pushed, x[6:] * decay]).T)
 
 
-FILTERS = {  # (the GPFs with the update the reference was recorded with: the kernels are the same)
-    "gpf": lambda model, n: MultipleModelGPF(model, n, seed=0, linearization="mean"),
-    "gpf-single": lambda model, n: GeometricProjectionPF(model, n, seed=0, linearization="mean"),
+FILTERS = {
+    "gpf": lambda model, n: MultipleModelGPF(model, n, seed=0),
+    "gpf-single": lambda model, n: GeometricProjectionPF(model, n, seed=0),
     "gpf-paper": lambda model, n: GeometricProjectionPF(model, n, seed=0, metric="euclidean",
                                                         weighting="likelihood", unmodelled_acceleration_std=0.0),
     "spf": lambda model, n: BootstrapPF(model, n, seed=0),

@@ -127,16 +127,15 @@ def test_the_lunar_report_names_the_rotations_about_the_centre(case, d):
 
 
 def test_the_constrained_gpf_keeps_the_range_only_rotations_that_the_unconstrained_one_narrows():
-    """A 20 km / 20 m/s prior, range only, the mean-linearised update: along the rotations the constrained
-    GPF's covariance stays at the prior's size; switched off (``observability_constraint=0``), the same
-    filter narrows them (the flattened update keeps them either way: test_flattened.py)."""
+    """A 20 km / 20 m/s prior, range only: along the rotations the constrained GPF's covariance stays at
+    the prior's size; switched off (``observability_constraint=0``), the same filter narrows them."""
     config = ScenarioConfig(case="range", epsilon=0.0, prior_position_std=20e3, prior_velocity_std=20.0,
                             duration=300.0)
     scenario = generate(config, 2)
 
     def rotation_spread(constraint):
         flt = GeometricProjectionPF(filter_model(config), 300, seed=1, unmodelled_acceleration_std=0.0,
-                                    observability_constraint=constraint, linearization="mean")
+                                    observability_constraint=constraint)
         flt.initialize(scenario.prior_mean, scenario.prior_cov)
         for k in range(scenario.times.size):
             flt.predict(config.dt)

@@ -309,17 +309,14 @@ def test_default_gpf_resampled_cloud_has_the_moments_of_the_weighted_one():
     assert np.allclose(resampled.covariance, kept.covariance, rtol=1e-12, atol=0)
 
 
-def test_default_kernel_bandwidth_is_the_optimal_one_for_the_flattened_update_and_vanishes():
+def test_default_kernel_bandwidth_is_wider_than_the_optimal_one_and_still_vanishes():
     from gpf_nav.filters.kernel import MAX_BANDWIDTH, default_bandwidth, optimal_bandwidth
 
-    assert default_bandwidth(500, 9) == pytest.approx(optimal_bandwidth(500, 9))  # the flattened update's
-    assert 0.56 < default_bandwidth(500, 9) < 0.58
-    assert default_bandwidth(500, 9, flattened=False) == pytest.approx(1.6 * optimal_bandwidth(500, 9))
-    assert default_bandwidth(10, 9, flattened=False) == MAX_BANDWIDTH
+    assert default_bandwidth(500, 9) == pytest.approx(1.6 * optimal_bandwidth(500, 9))
+    assert 0.91 < default_bandwidth(500, 9) < 0.93
+    assert default_bandwidth(10, 9) == MAX_BANDWIDTH
     sizes = [500, 10 ** 5, 10 ** 10, 10 ** 15]  # consistent: it vanishes (slowly) as N grows
     assert all(default_bandwidth(a, 9) > default_bandwidth(b, 9) for a, b in zip(sizes, sizes[1:]))
     assert default_bandwidth(10 ** 15, 9) < 0.11 and default_bandwidth(10 ** 30, 9) < 0.01
     f = GeometricProjectionPF(constant_velocity_model(), 500)
     assert f.kernel_bandwidth == default_bandwidth(500, f.model.state_dim)  # the augmented state's
-    f = GeometricProjectionPF(constant_velocity_model(), 500, linearization="mean")
-    assert f.kernel_bandwidth == default_bandwidth(500, f.model.state_dim, flattened=False)

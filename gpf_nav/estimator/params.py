@@ -44,7 +44,7 @@ ESTIMATOR = [
         Spec("unmodelled_acceleration_time", 1.0e6, "gpf: correlation time of the unmodelled acceleration.", "s", "> 0", checked_by=_BY_FILTER),
         Spec("nominal_prior", 0.5, "gpf-single: prior probability that the model needs no unmodelled acceleration; the estimate averages the two hypotheses; 0 publishes the compensated posterior as it is.", bounds="[0, 1)", checked_by=_BY_FILTER),
         Spec("model_switch_time", 2.0e5, "gpf: mean sojourn time of the nominal / compensated model chain.", "s", "> 0", checked_by=_BY_FILTER),
-        Spec("kernel_bandwidth", 0.0, "gpf, cloud metric: kernel bandwidth h; 0: the default, the Gaussian-optimal one for N and the state dimension.", bounds="[0, 1)", symbol="h", checked_by=_BY_FILTER),
+        Spec("kernel_bandwidth", 0.0, "gpf, cloud metric: kernel bandwidth h; 0: the default, 1.6 times the Gaussian-optimal one for N and the state dimension (at most 0.95).", bounds="[0, 1)", symbol="h", checked_by=_BY_FILTER),
         Spec("collapse_steps", 0, "gpf/spf: re-initialise after this many consecutive updates with ESS < 1.5 particles; 0 never.", bounds=">= 0", checked_by=_BY_FILTER),
         Spec("resampling", "systematic", "Resampling scheme.", choices=tuple(sorted(resampling.SCHEMES)), checked_by=_BY_FILTER),
         Spec("ess_threshold", 0.5, "Resample when ESS < tau N.", bounds="(0, 1]", symbol="tau", checked_by=_BY_FILTER),

@@ -98,8 +98,7 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
             (:attr:`mean`, :attr:`covariance`) is the model average of the two hypotheses
             (:mod:`gpf_nav.filters.model_averaging`); 0 gives the compensated posterior as it is.
         kernel_bandwidth: ``h`` of the cloud metric's kernel in (0, 1); default
-            :func:`~gpf_nav.filters.kernel.default_bandwidth`: the Gaussian-optimal one with the
-            flattened update, 1.6 times it with the mean-linearised one.
+            :func:`~gpf_nav.filters.kernel.default_bandwidth` (1.6 times the Gaussian-optimal one).
         outlier_gate: cloud metric: a measured component whose innovation is beyond this many standard
             deviations is not used (counted in :attr:`gated`; its co-state is still computed, so the
             integrity monitor sees it); 0 disables the gate.
@@ -114,12 +113,12 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         observability_constraint: the update keeps the prediction along the directions the data carried
             less information about than this fraction of the prior's (:class:`ParticleFilter`); default
             :data:`OBSERVABILITY_CONSTRAINT` for the cloud metric, 0 (off) for the others.
-        linearization: cloud metric: ``flattened`` (default) runs the whole update (kernel, projection, weights, moment matching,
+        linearization: cloud metric: ``mean`` (default) linearises the measurement once at the cloud's
+            mean; ``flattened`` runs the whole update (kernel, projection, weights, moment matching,
             resampling, the observability constraint) in coordinates where the measurement is exactly
             that linearisation, and maps the cloud back after it (:meth:`_begin_update`): a measurement
             curved in the state's coordinates (a range about a centre) then no longer narrows the cloud
-            along the directions it cannot see (issue 23); ``mean`` linearises the measurement once at
-            the cloud's mean and updates in the state's own coordinates (the default before).
+            along the directions it cannot see (issue 23).
         resampling: resampling scheme name.
         ess_threshold: tau in (0, 1].
         seed: seed of the filter's random generator.
@@ -136,7 +135,7 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
                  resampling: str = "systematic",
                  ess_threshold: float = 0.5, seed: int | np.random.Generator | None = None,
                  collapse_steps: int = 0, tempering_ess: float | None = None,
-                 observability_constraint: float | None = None, linearization: str = "flattened"):
+                 observability_constraint: float | None = None, linearization: str = "mean"):
         if reference not in REFERENCES:
             raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r}")
         if weighting not in WEIGHTINGS:
@@ -167,8 +166,7 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         self.weighting = weighting
         self.metric = metric
         self.regularization = float(regularization)
-        flattened = metric == "cloud" and linearization == "flattened"
-        self.kernel_bandwidth = (default_bandwidth(self.n_particles, model.state_dim, flattened)
+        self.kernel_bandwidth = (default_bandwidth(self.n_particles, model.state_dim)
                                  if kernel_bandwidth is None else float(kernel_bandwidth))
         self._previous_y: dict[str, np.ndarray] = {}
         self._input = None

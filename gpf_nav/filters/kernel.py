@@ -10,10 +10,11 @@ whose centres are shrunk towards the weighted mean ``m`` so that the mixture has
 mean ``m`` and covariance ``P``. The bandwidth ``h`` defaults to :data:`BANDWIDTH_SCALE` times the
 Gaussian-optimal one ``(4 / (N (d + 2)))^(1 / (d + 4))`` (at most :data:`MAX_BANDWIDTH`), which vanishes as
 ``N`` grows: the filter stays consistent. The optimal bandwidth is the one for estimating a density from
-``N`` points (0.57 for N = 500 and nine states). The GPF's flattened update (its default) uses it. With
-the mean-linearised update the kernel's draws along a curved measurement's level set land off it and are
-weighted down, so the cloud loses spread where the measurements see little; there 1.6 times the optimal
-``h`` made up for part of it (docs/filters.md).
+``N`` points; in the GPF the kernel is also the part of the prediction the projection corrects (the
+centres are corrected by the weights only), and a wider one lets the projection carry more of the update
+and the weights less: on the lunar descent the Gaussian-optimal ``h`` (0.57 for N = 500 and nine states)
+leaves the filter's covariance too small where the measurements see little, and 0.9-0.95 gave a more
+consistent filter than 0.8 without azimuth at a large model error (docs/filters.md).
 """
 from __future__ import annotations
 
@@ -26,8 +27,7 @@ from gpf_nav.linalg import cholesky_or_none, triangular_inverse
 
 
 BANDWIDTH_SCALE = 1.6
-"""Default bandwidth over the Gaussian-optimal one with the mean-linearised update (0.92 for N = 500 and
-nine states)."""
+"""Default bandwidth over the Gaussian-optimal one (0.92 for N = 500 and nine states)."""
 MAX_BANDWIDTH = 0.95
 """Largest default bandwidth (few particles in many dimensions)."""
 
@@ -37,11 +37,10 @@ def optimal_bandwidth(n_particles: int, dim: int) -> float:
     return float((4.0 / (n_particles * (dim + 2.0))) ** (1.0 / (dim + 4.0)))
 
 
-def default_bandwidth(n_particles: int, dim: int, flattened: bool = True) -> float:
-    """The GPF's default bandwidth: the optimal one for the flattened update, :data:`BANDWIDTH_SCALE` times
-    it for the mean-linearised one; at most :data:`MAX_BANDWIDTH` (module docstring)."""
-    scale = 1.0 if flattened else BANDWIDTH_SCALE
-    return min(MAX_BANDWIDTH, scale * optimal_bandwidth(n_particles, dim))
+def default_bandwidth(n_particles: int, dim: int) -> float:
+    """The GPF's default bandwidth: :data:`BANDWIDTH_SCALE` times the optimal one, at most
+    :data:`MAX_BANDWIDTH` (module docstring)."""
+    return min(MAX_BANDWIDTH, BANDWIDTH_SCALE * optimal_bandwidth(n_particles, dim))
 
 
 def weighted_moments(x: np.ndarray, weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
