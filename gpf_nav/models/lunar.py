@@ -132,6 +132,8 @@ class LunarDescentModel(StateSpaceModel):
         return self._jacobian(*self._line_of_sight(x))
 
     def measure_and_jacobian(self, x):
+        if x.shape[0] == 1:  # one point (the observability tracker's reference): the point Jacobian
+            return self.measure(x), self._point_jacobian(x[0])
         los = self._line_of_sight(x)
         return self._measure(*los), self._jacobian(*los)
 
