@@ -178,3 +178,26 @@ def report(free, data):
     if not (np.isfinite(information).all() and np.isfinite(vectors).all()):
         return None
     return s, information, vectors
+
+
+# --- gpf_nav/linalg.py positive_definite before its Cholesky screen (kernels/covariance.py)
+COVARIANCE_FLOOR_RELATIVE = 1e-10
+COVARIANCE_FLOOR_ABSOLUTE = 1e-12
+
+
+def positive_definite(cov):
+    cov = 0.5 * (cov + cov.T)
+    if not np.isfinite(cov).all():
+        return cov
+    variances = cov.diagonal()
+    if variances.min() < COVARIANCE_FLOOR_ABSOLUTE:
+        cov = cov.copy()
+        np.fill_diagonal(cov, np.maximum(variances, COVARIANCE_FLOOR_ABSOLUTE))
+    scale = np.sqrt(cov.diagonal())
+    vals, vecs = np.linalg.eigh(cov / np.outer(scale, scale))
+    floor = COVARIANCE_FLOOR_RELATIVE * max(1.0, float(vals[-1]))
+    if vals[0] >= floor:
+        return cov
+    floored = (vecs * np.maximum(vals, floor)) @ vecs.T
+    floored = 0.5 * (floored + floored.T) * np.outer(scale, scale)
+    return floored

@@ -14,7 +14,8 @@ import numpy_reference as reference
 from gpf_nav import resampling
 from gpf_nav.filters import BootstrapPF, GeometricProjectionPF, MultipleModelGPF
 from gpf_nav.filters.kernel import match_moments
-from gpf_nav.kernels import cloud, information, orbit
+from gpf_nav.linalg import positive_definite
+from gpf_nav.kernels import cloud, covariance, information, orbit
 from gpf_nav.kernels.systematic import systematic_ancestors
 from gpf_nav.models.compensation import ModelErrorCompensation
 from gpf_nav.models.lunar import MU_MOON, LunarDescentModel
@@ -232,3 +233,38 @@ def test_the_observability_arithmetic_fails_where_the_numpy_one_does():
     # the basis of the constrained directions: numpy's QR
     a = np.random.default_rng(70).standard_normal((9, 3))
     _close(information.orthonormal(a), np.linalg.qr(a)[0], atol=1e-15)
+
+
+def test_positive_definite_is_the_numpy_one_bit_for_bit():
+    """The Cholesky screen (gpf_nav/kernels/covariance.py) only decides whether the eigen-decomposition
+    runs: covariances of every condition, near and across the eigenvalue floor, collapsed variances,
+    asymmetric and non-finite input give the numpy code's result exactly."""
+    rng = np.random.default_rng(80)
+    cases = []
+    for n in (1, 2, 6, 9):
+        for smallest in (1.0, 1e-4, 1e-8, 3e-10 * n, 2e-10 * n, 1e-10 * n, 5e-11, 1e-12, 0.0, -1e-6):
+            Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
+            vals = np.concatenate([[smallest], rng.uniform(0.1, 2.0, n - 1)])[:n]
+            corr = (Q * vals) @ Q.T
+            scale = rng.uniform(1e-3, 1e4, n)
+            cases.append(corr * np.outer(scale, scale))
+        A = rng.standard_normal((n, n))
+        cases += [A @ A.T, A, A @ A.T * 1e-30, np.zeros((n, n)), np.full((n, n), np.nan)]
+        collapsed = A @ A.T
+        collapsed[0, :] = collapsed[:, 0] = 0.0
+        cases.append(collapsed)
+        inf = A @ A.T
+        inf[-1, 0] = np.inf
+        cases.append(inf)
+    screened = 0
+    for cov in cases:
+        got, expected = positive_definite(cov), reference.positive_definite(cov)
+        np.testing.assert_array_equal(got, expected)
+        screened += covariance.screen(np.ascontiguousarray(cov), reference.COVARIANCE_FLOOR_ABSOLUTE,
+                                      2.0 * reference.COVARIANCE_FLOOR_RELATIVE)[0] == covariance.ABOVE
+    assert 0 < screened < len(cases)
+    # read-only and non-contiguous input (a cached Q, a transposed view)
+    cov = cases[2].T.copy()
+    cov.flags.writeable = False
+    np.testing.assert_array_equal(positive_definite(cov), reference.positive_definite(cov))
+    np.testing.assert_array_equal(positive_definite(cases[3].T), reference.positive_definite(cases[3].T))

@@ -107,10 +107,18 @@ class LunarDescentModel(StateSpaceModel):
         return orbit.frames(_particle_last(x)).transpose(2, 0, 1)
 
     def process_noise(self, dt):
-        q = self.accel_noise_density ** 2
+        """White-acceleration ``Q(dt)``, read-only, kept for the last ``dt`` (the GPF reads it at every
+        update)."""
         dt = abs(float(dt))
-        i3 = np.eye(3)
-        return q * np.block([[dt ** 3 / 3.0 * i3, dt ** 2 / 2.0 * i3], [dt ** 2 / 2.0 * i3, dt * i3]])
+        key = (dt, self.accel_noise_density)
+        cached = getattr(self, "_noise", None)
+        if cached is None or cached[0] != key:
+            q = self.accel_noise_density ** 2
+            i3 = np.eye(3)
+            Q = q * np.block([[dt ** 3 / 3.0 * i3, dt ** 2 / 2.0 * i3], [dt ** 2 / 2.0 * i3, dt * i3]])
+            Q.flags.writeable = False
+            cached = self._noise = (key, Q)
+        return cached[1]
 
     # --- measurements -------------------------------------------------------------------------------
     def _line_of_sight(self, x):
