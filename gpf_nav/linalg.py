@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg.lapack import dpotrf, dtrtri
 
+from gpf_nav.kernels import covariance
+
 
 def psd_sqrt(cov: np.ndarray) -> np.ndarray:
     """Square root ``L`` with ``L L^T = cov`` of a symmetric PSD ``(n, n)``; never raises.
@@ -85,15 +87,25 @@ def positive_definite(cov: np.ndarray) -> np.ndarray:
     positions of kilometres and accelerations of millimetres per second squared keeps its small
     variances. Any consumer can factor and invert the result (its correlation matrix has a condition
     number of at most about 1e10). A matrix already above both floors is returned as it is
-    (symmetrised); a non-finite one unchanged (symmetrised), for the caller's non-finite checks.
+    (symmetrised); a non-finite one unchanged (symmetrised), for the caller's non-finite checks. The
+    eigen-decomposition runs only where a Cholesky screen cannot prove the floor already met
+    (:func:`gpf_nav.kernels.covariance.screen`): the same result, without its cost at every read.
     """
-    cov = 0.5 * (cov + cov.T)
-    if not np.isfinite(cov).all():
+    outcome, cov = covariance.screen(_matrix(cov), COVARIANCE_FLOOR_ABSOLUTE, _SCREEN_MARGIN)
+    if outcome != covariance.UNSURE:  # not finite (unchanged), or certainly above the floor
         return cov
-    variances = cov.diagonal()
-    if variances.min() < COVARIANCE_FLOOR_ABSOLUTE:
-        cov = cov.copy()
-        np.fill_diagonal(cov, np.maximum(variances, COVARIANCE_FLOOR_ABSOLUTE))
+    return _floored(cov)
+
+
+_SCREEN_MARGIN = 2.0 * COVARIANCE_FLOOR_RELATIVE
+"""The eigenvalue floor is ``COVARIANCE_FLOOR_RELATIVE`` times the largest eigenvalue of a correlation
+matrix, which is at most its trace: a Cholesky factor of the correlation matrix less twice that times the
+identity proves every eigenvalue above the floor, rounding included, and spares the eigen-decomposition."""
+
+
+def _floored(cov: np.ndarray) -> np.ndarray:
+    """:func:`positive_definite` of a finite symmetric ``cov`` with floored variances: the eigenvalues of
+    its correlation matrix raised to the floor (``cov`` itself when they are all above it)."""
     scale = np.sqrt(cov.diagonal())
     vals, vecs = np.linalg.eigh(cov / np.outer(scale, scale))
     floor = COVARIANCE_FLOOR_RELATIVE * max(1.0, float(vals[-1]))
@@ -102,3 +114,10 @@ def positive_definite(cov: np.ndarray) -> np.ndarray:
     floored = (vecs * np.maximum(vals, floor)) @ vecs.T
     floored = 0.5 * (floored + floored.T) * np.outer(scale, scale)
     return floored
+
+
+def _matrix(a) -> np.ndarray:
+    """``a`` as the writeable C-contiguous float64 array a kernel takes (no copy when it is one already:
+    numba compiles a kernel again for each layout and for read-only arrays)."""
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    return a if a.flags.writeable else a.copy()

@@ -119,3 +119,85 @@ def push(moved, frame, a, driven, integrated, velocity_gain, position_gain):
     if integrated.size:
         moved[integrated] += pushed * position_gain
     return moved
+
+
+# --- the observability tracker's arithmetic (gpf_nav/integrity/observability.py before kernels/information.py)
+REANCHOR_SIGMAS = 10.0
+
+
+def _symmetric(a):
+    return 0.5 * (a + a.T)
+
+
+def propagate(F, Q, reference, free, data):
+    """``(ok, free, data)`` of the tracker's ``predict``."""
+    if not (np.isfinite(F).all() and np.isfinite(Q).all() and np.isfinite(reference).all()):
+        return False, free, data
+    return True, _symmetric(F @ free @ F.T + Q), _symmetric(F @ data @ F.T + Q)
+
+
+def far(H, R, r, free):
+    """Whether the tracker's ``update`` moves its reference (None: H or r not finite, no update)."""
+    if not (np.isfinite(H).all() and np.isfinite(r).all()):
+        return None
+    spread = H @ free @ H.T + R
+    try:
+        with np.errstate(all="ignore"):
+            return not float(r @ np.linalg.solve(spread, r)) <= REANCHOR_SIGMAS ** 2  # NaN: far
+    except np.linalg.LinAlgError:
+        return True
+
+
+def joseph(H, R, P):
+    """The tracker's Joseph-form update of ``P``, or None when ``S`` is singular."""
+    PHt = P @ H.T
+    S = H @ PHt + R
+    try:
+        K = np.linalg.solve(S, PHt.T).T
+    except np.linalg.LinAlgError:
+        return None
+    A = np.eye(P.shape[0]) - K @ H
+    return _symmetric(A @ P @ A.T + K @ R @ K.T)
+
+
+def report(free, data):
+    """``(scale, information, vectors)`` of the tracker's report, or None."""
+    s = np.sqrt(np.maximum(np.diag(free), 1e-300))
+    free_s, data_s = free / np.outer(s, s), data / np.outer(s, s)
+    try:
+        L = np.linalg.cholesky(free_s)
+        C = np.linalg.cholesky(data_s)
+    except np.linalg.LinAlgError:
+        return None
+    A = np.linalg.solve(C, L)
+    _, sv, vt = np.linalg.svd(A)
+    information = np.maximum(sv[::-1] ** 2 - 1.0, 0.0)
+    u = vt[::-1]
+    vectors = (u @ L.T) * s
+    vectors = vectors / np.linalg.norm(vectors / s, axis=1, keepdims=True)
+    if not (np.isfinite(information).all() and np.isfinite(vectors).all()):
+        return None
+    return s, information, vectors
+
+
+# --- gpf_nav/linalg.py positive_definite before its Cholesky screen (kernels/covariance.py)
+COVARIANCE_FLOOR_RELATIVE = 1e-10
+COVARIANCE_FLOOR_ABSOLUTE = 1e-12
+
+
+def positive_definite(cov):
+    cov = 0.5 * (cov + cov.T)
+    if not np.isfinite(cov).all():
+        return cov
+    variances = cov.diagonal()
+    if variances.min() < COVARIANCE_FLOOR_ABSOLUTE:
+        cov = cov.copy()
+        np.fill_diagonal(cov, np.maximum(variances, COVARIANCE_FLOOR_ABSOLUTE))
+    scale = np.sqrt(cov.diagonal())
+    vals, vecs = np.linalg.eigh(cov / np.outer(scale, scale))
+    floor = COVARIANCE_FLOOR_RELATIVE * max(1.0, float(vals[-1]))
+    if vals[0] >= floor:
+        return cov
+    floored = (vecs * np.maximum(vals, floor)) @ vecs.T
+    floored = 0.5 * (floored + floored.T) * np.outer(scale, scale)
+    return floored

@@ -14,7 +14,8 @@ import numpy_reference as reference
 from gpf_nav import resampling
 from gpf_nav.filters import BootstrapPF, GeometricProjectionPF, MultipleModelGPF
 from gpf_nav.filters.kernel import match_moments
-from gpf_nav.kernels import cloud, orbit
+from gpf_nav.linalg import positive_definite
+from gpf_nav.kernels import cloud, covariance, information, orbit
 from gpf_nav.kernels.systematic import systematic_ancestors
 from gpf_nav.models.compensation import ModelErrorCompensation
 from gpf_nav.models.lunar import MU_MOON, LunarDescentModel
@@ -151,3 +152,119 @@ def test_seeded_run_gives_the_estimates_of_the_numpy_code(name):
     for n in (500, 3000):
         _close(_run(name, n), np.array(expected[f"{name}/{n}"]), rtol=1e-9)
 
+
+
+def _spd(rng, n, spread=1e3):
+    """A random ``(n, n)`` covariance with variances over ``spread**2`` (metres and m/s mixed)."""
+    A = rng.standard_normal((n, n)) * rng.uniform(1.0, spread, (n, 1))
+    return A @ A.T + np.diag(rng.uniform(0.1, 1.0, n))
+
+
+@pytest.mark.parametrize("n, m", [(1, 1), (3, 1), (6, 3), (9, 3), (9, 2), (12, 5)])
+def test_the_observability_arithmetic_is_the_numpy_one(n, m):
+    """The tracker's propagation, measurement update (reanchoring test, Joseph form) and report
+    (gpf_nav/kernels/information.py) against the numpy code they replaced, on random inputs."""
+    rng = np.random.default_rng(60 + 10 * n + m)
+    for trial in range(20):
+        free = _spd(rng, n)
+        # the data's covariance: the prior's after a few measurements of random combinations, noise 1 % to
+        # 1e-4 of their prior standard deviation (information up to about 1e8)
+        G = rng.standard_normal((max(1, n // 2), n))
+        data = reference.joseph(G, np.diag(np.diag(G @ free @ G.T) * rng.uniform(1e-6, 1e-4, G.shape[0])), free)
+        F = np.eye(n) + 0.3 * rng.standard_normal((n, n))
+        Q, x = _spd(rng, n, 10.0), rng.standard_normal(n)
+        got, expected = information.propagate(F, Q, x, free, data), reference.propagate(F, Q, x, free, data)
+        assert got[0] == expected[0]
+        for a, b in zip(got[1:], expected[1:]):
+            np.testing.assert_array_equal(a, a.T)
+            _close(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max())
+        H = rng.standard_normal((m, n)) * rng.uniform(1e-3, 1.0, (m, 1))
+        R = _spd(rng, m, 10.0) * 1e-4
+        # residuals inside and beyond the reanchoring distance (100 standard deviations of the spread)
+        r = rng.standard_normal(m) * np.sqrt(np.diag(H @ free @ H.T + R)) * (3.0 if trial % 2 else 40.0)
+        expected_far = reference.far(H, R, r, free)
+        outcome, updated = information.update(H, R, r, free, data, reference.REANCHOR_SIGMAS ** 2)
+        assert outcome == (information.FAR if expected_far else information.UPDATED), (trial, expected_far)
+        if outcome == information.FAR:
+            outcome, updated = information.update(H, R, np.zeros(0), free, data, 0.0)
+        assert outcome == information.UPDATED
+        expected = reference.joseph(H, R, data)
+        np.testing.assert_array_equal(updated, updated.T)
+        _close(updated, expected, rtol=1e-9, atol=1e-9 * np.abs(expected).max())
+        ok, s, info, vectors = information.report(free, updated)
+        expected_s, expected_info, expected_vectors = reference.report(free, updated)
+        assert ok
+        _close(s, expected_s)
+        # rounding grows with the condition of the scaled data covariance, (1 + max info) / (1 + min info);
+        # the small information is sv^2 - 1, an absolute error of the largest singular value's rounding
+        condition = (1.0 + expected_info.max()) / (1.0 + expected_info.min())
+        _close(info, expected_info, rtol=max(1e-12, 1e-15 * condition), atol=1e-14 * np.sqrt(condition))
+        # a direction is defined up to its sign (the same SVD on nearly the same matrix keeps it) where its
+        # information is apart from the others'; rounding grows with the condition there too
+        level = np.log1p(expected_info)
+        apart = np.array([np.delete(np.abs(level - v), i).min(initial=np.inf) > 0.1 for i, v in enumerate(level)])
+        assert apart.any()
+        _close(vectors[apart], expected_vectors[apart], rtol=0.0,
+               atol=1e-13 * condition * np.abs(expected_vectors).max())
+
+
+def test_the_observability_arithmetic_fails_where_the_numpy_one_does():
+    n, m = 4, 2
+    free, data, H, R = np.eye(n), np.eye(n), np.ones((m, n)), np.eye(m)
+    r = np.ones(m)
+    for bad in (np.nan, np.inf):
+        F = np.eye(n)
+        F[1, 2] = bad
+        assert not information.propagate(F, np.eye(n), np.zeros(n), free, data)[0]
+        assert not reference.propagate(F, np.eye(n), np.zeros(n), free, data)[0]
+        assert not information.propagate(np.eye(n), np.eye(n), np.full(n, bad), free, data)[0]
+        assert information.update(H, R, np.full(m, bad), free, data, 100.0)[0] == information.NOT_FINITE
+        assert reference.far(H, R, np.full(m, bad), free) is None
+    # a singular spread is far; a singular innovation covariance refuses the update
+    zero = np.zeros((m, m))
+    assert reference.far(H, zero, r, np.zeros((n, n))) is True
+    assert information.update(H, zero, r, np.zeros((n, n)), data, 100.0)[0] == information.FAR
+    assert reference.joseph(H, zero, np.zeros((n, n))) is None
+    assert information.update(H, zero, r, free, np.zeros((n, n)), 0.0)[0] == information.SINGULAR
+    # a covariance that is not positive definite gives no report
+    singular = np.ones((n, n))
+    assert reference.report(singular, data) is None and reference.report(free, -data) is None
+    assert not information.report(singular, data)[0] and not information.report(free, -data)[0]
+    # the basis of the constrained directions: numpy's QR
+    a = np.random.default_rng(70).standard_normal((9, 3))
+    _close(information.orthonormal(a), np.linalg.qr(a)[0], atol=1e-15)
+
+
+def test_positive_definite_is_the_numpy_one_bit_for_bit():
+    """The Cholesky screen (gpf_nav/kernels/covariance.py) only decides whether the eigen-decomposition
+    runs: covariances of every condition, near and across the eigenvalue floor, collapsed variances,
+    asymmetric and non-finite input give the numpy code's result exactly."""
+    rng = np.random.default_rng(80)
+    cases = []
+    for n in (1, 2, 6, 9):
+        for smallest in (1.0, 1e-4, 1e-8, 3e-10 * n, 2e-10 * n, 1e-10 * n, 5e-11, 1e-12, 0.0, -1e-6):
+            Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
+            vals = np.concatenate([[smallest], rng.uniform(0.1, 2.0, n - 1)])[:n]
+            corr = (Q * vals) @ Q.T
+            scale = rng.uniform(1e-3, 1e4, n)
+            cases.append(corr * np.outer(scale, scale))
+        A = rng.standard_normal((n, n))
+        cases += [A @ A.T, A, A @ A.T * 1e-30, np.zeros((n, n)), np.full((n, n), np.nan)]
+        collapsed = A @ A.T
+        collapsed[0, :] = collapsed[:, 0] = 0.0
+        cases.append(collapsed)
+        inf = A @ A.T
+        inf[-1, 0] = np.inf
+        cases.append(inf)
+    screened = 0
+    for cov in cases:
+        got, expected = positive_definite(cov), reference.positive_definite(cov)
+        np.testing.assert_array_equal(got, expected)
+        screened += covariance.screen(np.ascontiguousarray(cov), reference.COVARIANCE_FLOOR_ABSOLUTE,
+                                      2.0 * reference.COVARIANCE_FLOOR_RELATIVE)[0] == covariance.ABOVE
+    assert 0 < screened < len(cases)
+    # read-only and non-contiguous input (a cached Q, a transposed view)
+    cov = cases[2].T.copy()
+    cov.flags.writeable = False
+    np.testing.assert_array_equal(positive_definite(cov), reference.positive_definite(cov))
+    np.testing.assert_array_equal(positive_definite(cases[3].T), reference.positive_definite(cases[3].T))

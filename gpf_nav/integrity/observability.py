@@ -34,6 +34,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gpf_nav.kernels import information
+
 UNDETERMINED_INFORMATION = 0.01
 """Default threshold: a direction along which the data carried less than this much information, relative to
 the prior's (scaled units), is undetermined."""
@@ -142,15 +144,15 @@ class ObservabilityTracker:
         if self._free is None:
             return
         x = self._reference[None]
-        F = self.model.transition_jacobian(x, dt, t, u)[0]
-        Q = self._process_noise(dt, t)
-        reference = self.model.transition(x, dt, t, u)[0]
-        if not (np.isfinite(F).all() and np.isfinite(Q).all() and np.isfinite(reference).all()):
+        F = _matrix(self.model.transition_jacobian(x, dt, t, u)[0])
+        Q = _matrix(self._process_noise(dt, t))
+        reference = _matrix(self.model.transition(x, dt, t, u)[0])
+        ok, free, data = information.propagate(F, Q, reference, self._free, self._data)
+        if not ok:
             return
         self._reference = reference
         self.elapsed += dt
-        self._free = _symmetric(F @ self._free @ F.T + Q)
-        self._data = _symmetric(F @ self._data @ F.T + Q)
+        self._free, self._data = free, data
         self._report = None
 
     def _process_noise(self, dt: float, t: float) -> np.ndarray:
@@ -168,28 +170,21 @@ class ObservabilityTracker:
         if self._free is None or not rows.any():
             return
         h, H = sensor.measure_and_jacobian(self._reference[None], t)
-        H, R = H[0][rows], sensor.noise(t)[np.ix_(rows, rows)]
-        r = sensor.residual(y, h[0])[rows]
-        if not (np.isfinite(H).all() and np.isfinite(r).all()):
+        if rows.all():  # (no gathers: the usual case)
+            H, R, r = H[0], sensor.noise(t), sensor.residual(y, h[0])
+        else:
+            H, R, r = H[0][rows], sensor.noise(t)[np.ix_(rows, rows)], sensor.residual(y, h[0])[rows]
+        H, R = _matrix(H), _matrix(R)
+        outcome, data = information.update(H, R, _matrix(r), self._free, self._data, REANCHOR_SIGMAS ** 2)
+        if outcome == information.NOT_FINITE:
             return
-        spread = H @ self._free @ H.T + R
-        try:
-            with np.errstate(all="ignore"):
-                far = not float(r @ np.linalg.solve(spread, r)) <= REANCHOR_SIGMAS ** 2  # NaN: far
-        except np.linalg.LinAlgError:
-            far = True
-        if far:
+        if outcome == information.FAR:
             self.reanchor(mean)
-            H = sensor.jacobian(self._reference[None], t)[0][rows]
-        P = self._data
-        PHt = P @ H.T
-        S = H @ PHt + R
-        try:
-            K = np.linalg.solve(S, PHt.T).T
-        except np.linalg.LinAlgError:
+            H = _matrix(sensor.jacobian(self._reference[None], t)[0][rows])
+            outcome, data = information.update(H, R, _EMPTY, self._free, self._data, 0.0)
+        if outcome != information.UPDATED:  # a singular innovation covariance
             return
-        A = np.eye(P.shape[0]) - K @ H
-        self._data = _symmetric(A @ P @ A.T + K @ R @ K.T)  # Joseph form
+        self._data = data  # Joseph form
         self.updates += 1
         self._report = None
 
@@ -210,38 +205,28 @@ class ObservabilityTracker:
         return _orthonormal(report.eigenvectors[:d].T) if d else np.zeros((report.information.size, 0))
 
     def _compute(self) -> ObservabilityReport | None:
-        free, data = self._free, self._data
-        n = free.shape[0]
-        # scale to unit prior standard deviations first: the two covariances mix metres and m/s
-        s = np.sqrt(np.maximum(np.diag(free), 1e-300))
-        free_s, data_s = free / np.outer(s, s), data / np.outer(s, s)
-        try:
-            L = np.linalg.cholesky(free_s)
-            C = np.linalg.cholesky(data_s)
-        except np.linalg.LinAlgError:
+        # in units of the prior's standard deviations (the two covariances mix metres and m/s)
+        ok, s, info, vectors = information.report(self._free, self._data)
+        if not ok:
             return None
-        # J_s + I = L^T data^-1 L = (C^-1 L)^T (C^-1 L): the singular values of C^-1 L are sqrt(1 + lambda)
-        A = np.linalg.solve(C, L)
-        _, sv, vt = np.linalg.svd(A)
-        information = np.maximum(sv[::-1] ** 2 - 1.0, 0.0)
-        u = vt[::-1]  # rows, smallest information first
-        d = int(np.count_nonzero(information < self.threshold))
-        vectors = (u @ L.T) * s  # d_i = L u_i, back in state units
-        vectors = vectors / np.linalg.norm(vectors / s, axis=1, keepdims=True)
-        if not (np.isfinite(information).all() and np.isfinite(vectors).all()):
-            return None
-        return ObservabilityReport(d, vectors[:d], information, self.threshold, self.updates, self.elapsed,
+        d = int(np.count_nonzero(info < self.threshold))
+        return ObservabilityReport(d, vectors[:d], info, self.threshold, self.updates, self.elapsed,
                                    scale=s, eigenvectors=vectors)
 
 
-def _symmetric(a: np.ndarray) -> np.ndarray:
-    return 0.5 * (a + a.T)
+_EMPTY = np.zeros(0)
+
+
+def _matrix(a) -> np.ndarray:
+    """``a`` as the writeable C-contiguous float64 array the kernels take (no copy when it already is one:
+    numba compiles a kernel again for each layout and for read-only arrays, e.g. a cached ``Q``)."""
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    return a if a.flags.writeable else a.copy()
 
 
 def _orthonormal(a: np.ndarray) -> np.ndarray:
     """An orthonormal basis ``(n, d)`` of the columns of ``a`` (which are independent)."""
-    q, _ = np.linalg.qr(a)
-    return q
+    return information.orthonormal(_matrix(a))
 
 
 __all__ = ["ObservabilityReport", "ObservabilityTracker", "UNDETERMINED_INFORMATION"]

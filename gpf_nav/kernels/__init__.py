@@ -1,4 +1,6 @@
-"""Compiled inner loops of the particle filters and of the lunar model (numba, ``@njit(cache=True)``).
+"""Compiled inner loops of the particle filters and of the lunar model (numba, ``@njit(cache=True)``), and
+the small-matrix arithmetic every filter runs at each step (the observability tracker,
+:mod:`~gpf_nav.kernels.information`; the covariance floor's screen, :mod:`~gpf_nav.kernels.covariance`).
 
 Plain functions over float64 arrays, particle index last (``(n, N)``), called from the numpy code paths
 of :mod:`gpf_nav.filters`, :mod:`gpf_nav.models` and :mod:`gpf_nav.resampling`; random numbers are drawn
