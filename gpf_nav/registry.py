@@ -31,7 +31,8 @@ KINDS = ("gpf", "particle", "ensemble", "kalman")
 PARTICLE_OPTIONS = frozenset({"resampling", "ess_threshold", "collapse_steps", "regularization"})
 """Options every weighted-particle filter of the table takes."""
 GPF_OPTIONS = PARTICLE_OPTIONS | {"reference", "weighting", "metric", "unmodelled_acceleration_std",
-                                  "unmodelled_acceleration_time", "kernel_bandwidth", "tempering_ess"}
+                                  "unmodelled_acceleration_time", "kernel_bandwidth", "tempering_ess",
+                                  "linearization"}
 """Options every GPF of the table takes (:class:`~gpf_nav.filters.gpf.GeometricProjectionPF`'s)."""
 
 PAPER_GPF = MappingProxyType({"metric": "euclidean", "weighting": "likelihood",
@@ -169,6 +170,12 @@ for _entry in (
                 GPF_OPTIONS | {"nominal_prior"}, node=True,
                 description="one navigation-grade GPF on the compensated model, averaged with the nominal "
                             "hypothesis by Savage-Dickey (the default before the multiple model)"),
+    FilterEntry("gpf-flat", "GPF navigation, flattened update",
+                lambda model, n_particles, seed, **options: _gpf(
+                    model, n_particles, seed, **{"linearization": "flattened", **options}),
+                "gpf", GPF_OPTIONS | {"switch_time"},
+                description="gpf with both members updating in the flattened coordinates of their "
+                            "measurement (linearization flattened)"),
     FilterEntry("gpf-qmetric", "GPF Q-metric (innovation, corrected, eps=1)",
                 _gpf_variant(reference="innovation", weighting="corrected", metric="process_noise",
                              regularization=1.0, unmodelled_acceleration_std=0.0), "gpf", GPF_OPTIONS,

@@ -49,6 +49,10 @@ from gpf_nav.models.state_space import StateSpaceModel
 REFERENCES = ("innovation", "increment")
 METRICS = ("cloud", "euclidean", "process_noise")
 WEIGHTINGS = ("corrected", "likelihood")
+LINEARIZATIONS = ("mean", "flattened")
+FLATTENING_ITERATIONS = 3
+"""``linearization="flattened"``: fixed-point steps of the map back from the flattened coordinates
+(:meth:`GeometricProjectionPF._unflatten`)."""
 ILL_CONDITIONED = 1e12
 """Cloud metric: ``trace(S) / eps`` beyond which the projection is skipped (the update only weights)."""
 DEFAULT_REGULARIZATION = {"cloud": 1.0, "euclidean": 1e-6, "process_noise": 1e-6}
@@ -109,6 +113,12 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         observability_constraint: the update keeps the prediction along the directions the data carried
             less information about than this fraction of the prior's (:class:`ParticleFilter`); default
             :data:`OBSERVABILITY_CONSTRAINT` for the cloud metric, 0 (off) for the others.
+        linearization: cloud metric: ``mean`` (default) linearises the measurement once at the cloud's
+            mean; ``flattened`` runs the whole update (kernel, projection, weights, moment matching,
+            resampling, the observability constraint) in coordinates where the measurement is exactly
+            that linearisation, and maps the cloud back after it (:meth:`_begin_update`): a measurement
+            curved in the state's coordinates (a range about a centre) then no longer narrows the cloud
+            along the directions it cannot see (issue 23).
         resampling: resampling scheme name.
         ess_threshold: tau in (0, 1].
         seed: seed of the filter's random generator.
@@ -125,13 +135,15 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
                  resampling: str = "systematic",
                  ess_threshold: float = 0.5, seed: int | np.random.Generator | None = None,
                  collapse_steps: int = 0, tempering_ess: float | None = None,
-                 observability_constraint: float | None = None):
+                 observability_constraint: float | None = None, linearization: str = "mean"):
         if reference not in REFERENCES:
             raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r}")
         if weighting not in WEIGHTINGS:
             raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
         if metric not in METRICS:
             raise ValueError(f"metric must be one of {METRICS}, got {metric!r}")
+        if linearization not in LINEARIZATIONS:
+            raise ValueError(f"linearization must be one of {LINEARIZATIONS}, got {linearization!r}")
         if metric == "cloud" and reference == "increment":
             raise ValueError("reference='increment' needs metric 'euclidean' or 'process_noise'")
         if regularization is None:
@@ -161,6 +173,8 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         self._proposal = None
         self._moment_target = None
         self.moment_matching = bool(moment_matching)
+        self.linearization = linearization
+        self._flat = None
         self._init_gate(outlier_gate, outlier_gate_limit)  # (gating.py)
 
     def initialize(self, mean, cov, t0=0.0):
@@ -168,7 +182,7 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         self._previous_y = {}
         # an update that recovered (re-initialised) before weighting left its proposal behind: the new
         # cloud is not the one it drew
-        self._proposal = self._moment_target = None
+        self._proposal = self._moment_target = self._flat = None
 
     # --- the proposal ---------------------------------------------------------------------------------
     def predict(self, dt, u=None):
@@ -189,6 +203,7 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         """
         if self.metric != "cloud" or not rows.any():
             return super()._sample(x_pred, y, rows, dt)
+        flat = self._flat  # the cloud is in flattened coordinates (:meth:`_begin_update`)
         mean, centres, D = shrink(x_pred, *self._cloud_moments(), self.kernel_bandwidth)  # (x_pred is self._x)
         if dt > 0.0:
             D += self.model.process_noise(dt, self._pending_t)
@@ -198,8 +213,12 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
             return super()._sample(x_pred, y, rows, dt)
         n, eps = self.model.state_dim, self.regularization
         sensor = self._sensor
-        H = sensor.jacobian(mean[None], self.time)[0]  # (m, n), at the cloud's mean
-        r = sensor.residual(y, sensor.measure(centres.T, self.time))  # (N, m)
+        if flat is None:
+            H = sensor.jacobian(mean[None], self.time)[0]  # (m, n), at the cloud's mean
+            r = sensor.residual(y, sensor.measure(centres.T, self.time))  # (N, m)
+        else:  # the measurement is linear in the flattened coordinates
+            H = flat[2]
+            r = sensor.residual(y, flat[1])[None] - (centres.T - flat[0]) @ H.T
         whitened = self._whitened(H, r, rows, C)
         if whitened is None:
             self._set_costate(None, rows, dt)
@@ -240,14 +259,87 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
             spread = C @ U  # (I - K H) D = C U (C U)^T
             self._proposal = (pair, spread @ spread.T)
         if self.weighting == "likelihood":
-            return x, 0.0, used
-        # log N(x; centre, D) - log q(x) = (|z|^2 - |w|^2) / 2 + log det U (x - centre = C w, and
-        # x - proposal mean = C U z)
-        correction = np.einsum("kn,kn->n", z, z)
-        correction -= np.einsum("kn,kn->n", w, w)
-        correction *= 0.5
-        correction -= sum(map(math.log, R.diagonal().tolist()))  # log det U
+            correction = 0.0
+        else:
+            # log N(x; centre, D) - log q(x) = (|z|^2 - |w|^2) / 2 + log det U (x - centre = C w, and
+            # x - proposal mean = C U z)
+            correction = np.einsum("kn,kn->n", z, z)
+            correction -= np.einsum("kn,kn->n", w, w)
+            correction *= 0.5
+            correction -= sum(map(math.log, R.diagonal().tolist()))  # log det U
         return x, correction, used
+
+    def _begin_update(self, rows):
+        """``linearization="flattened"``: move the predicted cloud to the flattened coordinates
+        ``xi = x + H^+ nu(x)`` (:meth:`_flattening`, :meth:`_curvature`), where the measured rows are exactly
+        ``h(m) + H (xi - m)``: the update is then the update of a linear measurement, for which the
+        kernel's straight-line draws, the one gain and the exact weights are right. Read on a range about
+        a centre, the curved shell of constant range becomes a plane, and a particle far along a rotation
+        about the centre is no longer drawn off the shell and weighted down (the kernel draws along the
+        tangent plane at the mean: a 20 km step moves the range by 109 m, 3.6 range sigmas)."""
+        if self.metric != "cloud" or self.linearization != "flattened":
+            return
+        flat = self._flattening(self._x, rows)
+        if flat is not None:
+            self._x = self._x + flat[3] @ self._curvature(self._x, flat).T
+            self._flat = flat
+
+    def _end_update(self):
+        self._unflatten()
+
+    def _constraint_jacobian(self):
+        flat = self._flat
+        return None if flat is None else flat[2][flat[4]]
+
+    def _log_likelihood(self, x, y, rows):
+        """In flattened coordinates, the likelihood of the measurement linearised at the cloud's mean (the
+        particle's own measurement once mapped back)."""
+        flat = self._flat
+        if flat is None:
+            return super()._log_likelihood(x, y, rows)
+        mean, h_mean, H, _, _ = flat
+        e = self._sensor.residual(y, h_mean)[:, None] - H @ (x - mean[:, None])  # (m, N)
+        w, constant = self._whitening(rows)
+        e = e if rows.all() else e[rows]
+        ew = e * w[:, None] if w.ndim == 1 else w @ e
+        return constant - 0.5 * np.einsum("kn,kn->n", ew, ew)
+
+    def _flattening(self, x, rows):
+        """``(m, h(m), H, H^+, rows)`` of the flattened coordinates of the cloud ``x`` ``(n, N)`` (None
+        when the Jacobian at its mean ``m`` is not of full row rank): ``H = dh/dx`` ``(m, n)`` at ``m``,
+        ``H^+ = H_r^T (H_r H_r^T)^-1`` of its measured ``rows`` ``H_r`` (the shortest move, in the state's
+        own units, that changes the measurement by a given amount)."""
+        sensor = self._sensor
+        mean = np.einsum("in,n->i", x, self._weights)
+        h, H = sensor.measure_and_jacobian(mean[None], self.time)
+        h, H = h[0], H[0]
+        measured = H[rows]
+        try:
+            pinv = np.linalg.solve(measured @ measured.T, measured).T
+        except np.linalg.LinAlgError:
+            return None
+        if not (np.isfinite(pinv).all() and np.isfinite(h).all() and np.isfinite(H).all()):
+            return None
+        return mean, h, H, pinv, rows
+
+    def _curvature(self, x, flat):
+        """``nu(x) = h(x) - h(m) - H (x - m)`` ``(N, k)`` of the measured rows (angles wrapped): what the
+        measurement of each particle ``x`` ``(n, N)`` departs from its linearisation at the cloud's mean."""
+        mean, h_mean, H, _, rows = flat
+        nu = self._sensor.residual(self._sensor.measure(x.T, self.time), h_mean[None]) - (x.T - mean) @ H.T
+        return nu if rows.all() else nu[:, rows]
+
+    def _unflatten(self):
+        """Map the cloud back from the flattened coordinates: ``x`` with ``x + H^+ nu(x) = xi``."""
+        flat, self._flat = self._flat, None
+        if flat is None:
+            return
+        xi = self._x
+        x = xi - flat[3] @ self._curvature(xi, flat).T
+        for _ in range(FLATTENING_ITERATIONS - 1):
+            x = xi - flat[3] @ self._curvature(x, flat).T
+        if np.isfinite(x).all():
+            self._x = np.ascontiguousarray(x)
 
     def _whitened(self, H: np.ndarray, r: np.ndarray, rows: np.ndarray, C: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:

@@ -235,17 +235,19 @@ class ParticleFilter(Filter):
         prior, basis = None, None
         if rows.any():
             self._observe_update(y, sensor, rows, self._cloud_mean())
+            self._begin_update(rows)
             if self.observability_constraint:
                 basis = self._observability.basis(self.observability_constraint)
                 prior = self._predicted_moments() if basis.shape[1] else None
         try:
             evidence, rows = self._tempered_stages(y, rows)
+            if evidence is not None and prior is not None:
+                self._constrain(basis, *prior)
         finally:
             self._fraction = 1.0
+            self._end_update()
         if evidence is None:  # the filter re-initialised itself
             return
-        if prior is not None:
-            self._constrain(basis, *prior)
         self.tempered_updates += self.tempering_stages > 1
         self.log_likelihood = evidence
         self._after_update(y, rows)
@@ -287,6 +289,19 @@ class ParticleFilter(Filter):
             if remaining - fraction < 1e-12:  # (rounding: the last stage takes what is left)
                 fraction = remaining
 
+    def _begin_update(self, rows: np.ndarray) -> None:
+        """Hook run once an update has measured ``rows``, before the constraint's prior moments are read
+        and the first draw (the GPF moves the cloud to its flattened coordinates here)."""
+
+    def _end_update(self) -> None:
+        """Hook run after the stages and the constraint, also when they failed (the GPF maps the cloud
+        back from its flattened coordinates)."""
+
+    def _constraint_jacobian(self) -> np.ndarray | None:
+        """Jacobian ``(k, n)`` of the measured rows whose row space :meth:`_constrain` leaves to the update
+        (None: the tracker's directions as they are)."""
+        return None
+
     def _predicted_moments(self) -> tuple[np.ndarray, np.ndarray]:
         """Mean ``(n,)`` and covariance ``(n, n)`` of the predicted cloud, pending process noise included."""
         mean, cov = self._cloud_moments()
@@ -326,13 +341,32 @@ class ParticleFilter(Filter):
         ``B = P^- V (V^T P^- V)^-1``, and the cloud is moved to them by an affine map. The particle
         update is exact only in the limit; along an undetermined direction of a curved problem its
         approximations (a Gaussian kernel, one linearisation for the whole cloud) manufacture information
-        there is none of, which this removes. Computed in units of the prediction's standard deviations."""
+        there is none of, which this removes. Computed in units of the prediction's standard deviations.
+        When :meth:`_constraint_jacobian` gives the update's measurement Jacobian (the GPF's flattened
+        update), each undetermined direction loses its part that this measurement moves: the tracker's
+        directions come from a reference that may be tens of kilometres from the cloud, and a direction
+        tilted towards the measured one would give the measured coordinate the prediction's spread."""
         n = cov.shape[0]
         scale = np.sqrt(np.maximum(cov.diagonal(), 1e-300))
         P_prior = cov / np.outer(scale, scale)
         m_prior = mean / scale
         posterior = self._cloud_moments()
         m_post, P_post = posterior[0] / scale, posterior[1] / np.outer(scale, scale)
+        J = self._constraint_jacobian()
+        if J is not None and basis.shape[1]:
+            # a direction the measurement moves is not undetermined in this update: keep its part that the
+            # measurement does not see (in the scaled coordinates the map works in)
+            scaled = basis / scale[:, None]
+            scaled = scaled / np.linalg.norm(scaled, axis=0)
+            Hs = J * scale
+            try:
+                scaled = scaled - np.linalg.solve(Hs @ Hs.T, Hs).T @ (Hs @ scaled)
+            except np.linalg.LinAlgError:
+                return
+            keep = np.linalg.norm(scaled, axis=0) > 0.5
+            basis = scaled[:, keep] * scale[:, None]
+            if not basis.shape[1]:
+                return
         if basis.shape[1] >= n:
             m, P = m_prior, P_prior
         else:
