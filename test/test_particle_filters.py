@@ -314,6 +314,7 @@ def test_default_kernel_bandwidth_is_wider_than_the_optimal_one_and_still_vanish
 
     assert default_bandwidth(500, 9) == pytest.approx(1.6 * optimal_bandwidth(500, 9))
     assert 0.91 < default_bandwidth(500, 9) < 0.93
+    assert default_bandwidth(500, 9, flattened=True) == pytest.approx(optimal_bandwidth(500, 9))
     assert default_bandwidth(10, 9) == MAX_BANDWIDTH
     sizes = [500, 10 ** 5, 10 ** 10, 10 ** 15]  # consistent: it vanishes (slowly) as N grows
     assert all(default_bandwidth(a, 9) > default_bandwidth(b, 9) for a, b in zip(sizes, sizes[1:]))

@@ -98,7 +98,9 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
             (:attr:`mean`, :attr:`covariance`) is the model average of the two hypotheses
             (:mod:`gpf_nav.filters.model_averaging`); 0 gives the compensated posterior as it is.
         kernel_bandwidth: ``h`` of the cloud metric's kernel in (0, 1); default
-            :func:`~gpf_nav.filters.kernel.default_bandwidth` (1.6 times the Gaussian-optimal one).
+            :func:`~gpf_nav.filters.kernel.default_bandwidth`: 1.6 times the Gaussian-optimal one with
+            the mean-linearised update; with the flattened one the optimal one, and 1.6 times it while an
+            update is tempered or a measured component was beyond the gate in a recent update.
         outlier_gate: cloud metric: a measured component whose innovation is beyond this many standard
             deviations is not used (counted in :attr:`gated`; its co-state is still computed, so the
             integrity monitor sees it); 0 disables the gate.
@@ -166,8 +168,14 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         self.weighting = weighting
         self.metric = metric
         self.regularization = float(regularization)
-        self.kernel_bandwidth = (default_bandwidth(self.n_particles, model.state_dim)
+        flattened = metric == "cloud" and linearization == "flattened"
+        self.kernel_bandwidth = (default_bandwidth(self.n_particles, model.state_dim, flattened)
                                  if kernel_bandwidth is None else float(kernel_bandwidth))
+        # the bandwidth while an update is in trouble (tempered, or beyond the gate): the wider kernel lets
+        # the projection carry more of a large correction (a 3-sigma prior against gated ranges diverged
+        # with the optimal one)
+        self._troubled_bandwidth = (default_bandwidth(self.n_particles, model.state_dim)
+                                    if kernel_bandwidth is None else self.kernel_bandwidth)
         self._previous_y: dict[str, np.ndarray] = {}
         self._input = None
         self._proposal = None
@@ -204,7 +212,9 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         if self.metric != "cloud" or not rows.any():
             return super()._sample(x_pred, y, rows, dt)
         flat = self._flat  # the cloud is in flattened coordinates (:meth:`_begin_update`)
-        mean, centres, D = shrink(x_pred, *self._cloud_moments(), self.kernel_bandwidth)  # (x_pred is self._x)
+        troubled = self._fraction < 1.0 or any(streak.any() for streak in self._gate_streaks.values())
+        h = self._troubled_bandwidth if troubled else self.kernel_bandwidth
+        mean, centres, D = shrink(x_pred, *self._cloud_moments(), h)  # (x_pred is self._x)
         if dt > 0.0:
             D += self.model.process_noise(dt, self._pending_t)
         C = cholesky_or_none(D, symmetric=True) if np.isfinite(D).all() else None  # (its lower triangle)

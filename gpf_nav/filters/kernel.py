@@ -10,11 +10,12 @@ whose centres are shrunk towards the weighted mean ``m`` so that the mixture has
 mean ``m`` and covariance ``P``. The bandwidth ``h`` defaults to :data:`BANDWIDTH_SCALE` times the
 Gaussian-optimal one ``(4 / (N (d + 2)))^(1 / (d + 4))`` (at most :data:`MAX_BANDWIDTH`), which vanishes as
 ``N`` grows: the filter stays consistent. The optimal bandwidth is the one for estimating a density from
-``N`` points; in the GPF the kernel is also the part of the prediction the projection corrects (the
-centres are corrected by the weights only), and a wider one lets the projection carry more of the update
-and the weights less: on the lunar descent the Gaussian-optimal ``h`` (0.57 for N = 500 and nine states)
-leaves the filter's covariance too small where the measurements see little, and 0.9-0.95 gave a more
-consistent filter than 0.8 without azimuth at a large model error (docs/filters.md).
+``N`` points (0.57 for N = 500 and nine states). In the GPF the kernel is also the part of the prediction
+the projection corrects, and a wider one lets the projection carry more of the update and the weights
+less. With the mean-linearised update the Gaussian-optimal ``h`` leaves the covariance too small where the
+measurements see little (its draws along a curved measurement's level set land off it and are weighted
+down), and 1.6 times it made up for part of that. The flattened update does not lose that spread and
+uses the optimal ``h``, and the wider one only while an update is in trouble (docs/filters.md).
 """
 from __future__ import annotations
 
@@ -27,7 +28,8 @@ from gpf_nav.linalg import cholesky_or_none, triangular_inverse
 
 
 BANDWIDTH_SCALE = 1.6
-"""Default bandwidth over the Gaussian-optimal one (0.92 for N = 500 and nine states)."""
+"""Default bandwidth over the Gaussian-optimal one with the mean-linearised update (0.92 for N = 500 and
+nine states)."""
 MAX_BANDWIDTH = 0.95
 """Largest default bandwidth (few particles in many dimensions)."""
 
@@ -37,10 +39,11 @@ def optimal_bandwidth(n_particles: int, dim: int) -> float:
     return float((4.0 / (n_particles * (dim + 2.0))) ** (1.0 / (dim + 4.0)))
 
 
-def default_bandwidth(n_particles: int, dim: int) -> float:
-    """The GPF's default bandwidth: :data:`BANDWIDTH_SCALE` times the optimal one, at most
-    :data:`MAX_BANDWIDTH` (module docstring)."""
-    return min(MAX_BANDWIDTH, BANDWIDTH_SCALE * optimal_bandwidth(n_particles, dim))
+def default_bandwidth(n_particles: int, dim: int, flattened: bool = False) -> float:
+    """The GPF's default bandwidth: :data:`BANDWIDTH_SCALE` times the optimal one for the mean-linearised
+    update, the optimal one for the flattened update; at most :data:`MAX_BANDWIDTH` (module docstring)."""
+    scale = 1.0 if flattened else BANDWIDTH_SCALE
+    return min(MAX_BANDWIDTH, scale * optimal_bandwidth(n_particles, dim))
 
 
 def weighted_moments(x: np.ndarray, weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
