@@ -170,6 +170,9 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         flattened = metric == "cloud" and linearization == "flattened"
         self.kernel_bandwidth = (default_bandwidth(self.n_particles, model.state_dim, flattened)
                                  if kernel_bandwidth is None else float(kernel_bandwidth))
+        # while an update is tempered (the prior far from the data) the wider kernel of the mean-linearised
+        # update lets the projection carry more of it
+        self._tempered_bandwidth = max(self.kernel_bandwidth, default_bandwidth(self.n_particles, model.state_dim, False)) if kernel_bandwidth is None else self.kernel_bandwidth
         self._previous_y: dict[str, np.ndarray] = {}
         self._input = None
         self._proposal = None
@@ -206,7 +209,8 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         if self.metric != "cloud" or not rows.any():
             return super()._sample(x_pred, y, rows, dt)
         flat = self._flat  # the cloud is in flattened coordinates (:meth:`_begin_update`)
-        mean, centres, D = shrink(x_pred, *self._cloud_moments(), self.kernel_bandwidth)  # (x_pred is self._x)
+        h = self.kernel_bandwidth if self._fraction >= 1.0 else self._tempered_bandwidth
+        mean, centres, D = shrink(x_pred, *self._cloud_moments(), h)  # (x_pred is self._x)
         if dt > 0.0:
             D += self.model.process_noise(dt, self._pending_t)
         C = cholesky_or_none(D, symmetric=True) if np.isfinite(D).all() else None  # (its lower triangle)
