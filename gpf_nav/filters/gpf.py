@@ -209,7 +209,8 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         if self.metric != "cloud" or not rows.any():
             return super()._sample(x_pred, y, rows, dt)
         flat = self._flat  # the cloud is in flattened coordinates (:meth:`_begin_update`)
-        h = self.kernel_bandwidth if self._fraction >= 1.0 else self._tempered_bandwidth
+        troubled = self._fraction < 1.0 or any(streak.any() for streak in self._gate_streaks.values())
+        h = self._tempered_bandwidth if troubled else self.kernel_bandwidth
         mean, centres, D = shrink(x_pred, *self._cloud_moments(), h)  # (x_pred is self._x)
         if dt > 0.0:
             D += self.model.process_noise(dt, self._pending_t)
