@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 
 from gpf_nav.filters import GeometricProjectionPF
+from gpf_nav.filters.flattening import flattening
 from gpf_nav.models import LinearGaussianModel
+from gpf_nav.sensors.model import ModelSensor
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate, undetermined_subspace
 
 
@@ -84,3 +86,61 @@ def test_the_flattened_gpf_widens_its_kernel_while_an_update_is_in_trouble():
         flt.update(scenario.measurements[k])
     assert flt.gated > 0 and flt.tempered_updates > 0
     assert np.linalg.norm(flt.mean[:3] - scenario.truth[-1, :3]) < 1e3
+
+
+def _range_only_cloud(n_particles=200):
+    config = ScenarioConfig(case="range", epsilon=0.0, prior_position_std=20e3, prior_velocity_std=20.0)
+    scenario = generate(config, 2)
+    model = filter_model(config)
+    cloud = np.random.default_rng(3).multivariate_normal(scenario.prior_mean, scenario.prior_cov, n_particles).T
+    return config, model, np.ascontiguousarray(cloud), np.full(n_particles, 1.0 / n_particles)
+
+
+def _ranges(model, x, lags):
+    """The range now and ``lags`` seconds ahead of each particle ``x`` ``(n, N)``: ``(N, 1 + len(lags))``."""
+    columns, flowed, t = [model.measure(x.T)[:, 0]], x.T, 0.0
+    for lag in lags:
+        flowed, t = model.transition(flowed, lag - t), lag
+        columns.append(model.measure(flowed)[:, 0])
+    return np.column_stack(columns)
+
+
+@pytest.mark.parametrize("lags", [(), (50.0, 100.0)])
+def test_the_flattened_coordinates_make_the_ranges_now_and_ahead_linear(lags):
+    """In the flattened coordinates each stacked row is exactly its linearisation at the cloud's mean: the
+    map back of ``xi`` measures ``g(m) + J (xi - m)``, now and at every lag."""
+    _, model, x, weights = _range_only_cloud()
+    rows = np.array([True, False, False])
+    flat = flattening(x, weights, rows, ModelSensor(model), model, 0.0, None, lags, model.state_dim)
+    xi = flat.flatten(x)
+    back = flat.unflatten(xi)
+    np.testing.assert_allclose(back, x, rtol=0, atol=1e-3)  # (m and m/s: the round trip)
+    linear = [flat.measured[0] + (xi.T - flat.mean) @ flat.jacobian[0]]
+    linear += [measured[0] + (xi.T - flat.mean) @ jacobian[0] for measured, jacobian in flat.ahead]
+    np.testing.assert_allclose(_ranges(model, back, lags), np.column_stack(linear), rtol=0, atol=0.05)
+
+
+def test_a_straight_draw_in_the_flow_flattened_coordinates_keeps_the_ranges_ahead():
+    """Along a rotation about the centre (no row sees it), a straight 20 km move in the coordinates flattened
+    along the flow keeps the ranges 50 and 100 s ahead; flattened on the range now only, the same move
+    changes them by 38 and 76 m (the speed the straight move adds is seen by the dynamics)."""
+    config, model, x, weights = _range_only_cloud()
+    rows = np.array([True, False, False])
+    lags = (50.0, 100.0)
+    change = {}
+    for flow in (False, True):
+        flat = flattening(x, weights, rows, ModelSensor(model), model, 0.0, None, lags if flow else (),
+                          model.state_dim)
+        rotations = undetermined_subspace(config, flat.mean)  # (6, 3)
+        step = rotations[:, np.argmax(np.linalg.norm(rotations[:3], axis=0))]
+        step = step * 20e3 / np.linalg.norm(step[:3])
+        xi = flat.flatten(x)
+        moved = flat.unflatten(xi + step[:, None])
+        change[flow] = np.abs(_ranges(model, moved, lags) - _ranges(model, flat.unflatten(xi), lags)).max(axis=0)
+    assert (change[True] < 1.0).all(), change
+    assert change[False][1:].min() > 20.0 * change[True][1:].max(), change
+
+
+def test_a_negative_flattening_horizon_is_refused():
+    with pytest.raises(ValueError, match="flattening_horizon"):
+        GeometricProjectionPF(_linear_model(), 10, linearization="flattened", flattening_horizon=-1.0)

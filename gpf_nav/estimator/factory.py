@@ -25,7 +25,9 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
                 metric: str = "cloud", regularization: float = 0.0,
                 unmodelled_acceleration_std: float = UNMODELLED_ACCELERATION_STD,
                 unmodelled_acceleration_time: float = UNMODELLED_ACCELERATION_TIME,
-                nominal_prior: float = NOMINAL_PRIOR, kernel_bandwidth: float = 0.0, model_switch_time: float = SWITCH_TIME, collapse_steps: int = 0,
+                nominal_prior: float = NOMINAL_PRIOR, kernel_bandwidth: float = 0.0,
+                flattening_horizon: float = registry.FLATTENING_HORIZON, model_switch_time: float = SWITCH_TIME,
+                collapse_steps: int = 0,
                 resampling: str = "systematic", ess_threshold: float = 0.5, compute_costate: bool = True,
                 ukf_alpha: float = 1e-3, ukf_beta: float = 2.0, ukf_kappa: float = 0.0):
     """Build the node's filter ``name`` (one of :data:`FILTERS`, an entry of :mod:`gpf_nav.registry`) on
@@ -34,8 +36,8 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
     ``seed < 0`` (or None) draws a random seed; ``regularization`` and ``kernel_bandwidth`` 0 take the
     filter's defaults. Options a filter does not use are ignored (for example ``n_particles`` for the
     EKF); the entry's ``node_options`` are added. With the defaults, ``make_filter("gpf", model)`` is
-    ``MultipleModelGPF(model)`` (``gpf-mm`` the same), or the nominal ``GeometricProjectionPF`` when
-    ``unmodelled_acceleration_std`` is 0 (no second model); ``make_filter("gpf-single", model)`` is
+    ``MultipleModelGPF(model, **registry.NAVIGATION_GPF)`` (``gpf-mm`` the same), or the nominal
+    ``GeometricProjectionPF`` when ``unmodelled_acceleration_std`` is 0 (no second model); ``make_filter("gpf-single", model)`` is
     ``GeometricProjectionPF(model)`` (``nominal_prior`` applies to it only). Raises ValueError naming the
     offending parameter.
     """
@@ -47,7 +49,7 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
                                   unmodelled_acceleration_std=unmodelled_acceleration_std,
                                   unmodelled_acceleration_time=unmodelled_acceleration_time,
                                   nominal_prior=nominal_prior, kernel_bandwidth=kernel_bandwidth,
-                                  model_switch_time=model_switch_time)
+                                  flattening_horizon=flattening_horizon, model_switch_time=model_switch_time)
     if errors:
         raise ValueError("; ".join(errors))
     seed = None if seed is None or int(seed) < 0 else int(seed)
@@ -61,6 +63,7 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
         options["regularization"] = regularization
     if kernel_bandwidth:
         options["kernel_bandwidth"] = kernel_bandwidth
+    options["flattening_horizon"] = flattening_horizon  # (gpf-single, mean-linearised, has no use for it)
     entry = registry.lookup(name)
     return registry.make(name, model, int(n_particles), seed, **options, **entry.node_options)
 
@@ -69,6 +72,7 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
                          ess_threshold, metric="cloud", collapse_steps=0, ukf_alpha=1e-3,
                          ukf_kappa=0.0, state_dim=6, unmodelled_acceleration_std=0.0,
                          unmodelled_acceleration_time=1.0, nominal_prior=0.0, kernel_bandwidth=0.0,
+                         flattening_horizon=0.0,
                          model_switch_time=SWITCH_TIME) -> list[str]:
     """Human-readable errors for invalid filter parameters (empty when all are valid)."""
     from gpf_nav import resampling as resamplers
@@ -118,6 +122,8 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
             errors.append(f"parameter 'nominal_prior' = {nominal_prior!r} must lie in [0, 1)")
         if not (math.isfinite(kernel_bandwidth) and 0.0 <= kernel_bandwidth < 1.0):
             errors.append(f"parameter 'kernel_bandwidth' = {kernel_bandwidth!r} must lie in [0, 1) (0: optimal)")
+        if not (math.isfinite(flattening_horizon) and flattening_horizon >= 0.0):
+            errors.append(f"parameter 'flattening_horizon' = {flattening_horizon!r} must be >= 0 [s]")
     if "alpha" in entry.options:
         if not ukf_alpha > 0.0:
             errors.append(f"parameter 'ukf_alpha' = {ukf_alpha!r} must be positive")

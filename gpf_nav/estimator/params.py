@@ -19,6 +19,7 @@ from gpf_nav.estimator.factory import FILTERS
 from gpf_nav.estimator.streams import STREAMS, stream_parameters
 from gpf_nav.filters.gpf import METRICS, REFERENCES, WEIGHTINGS
 from gpf_nav.models.lunar import MU_MOON
+from gpf_nav.registry import FLATTENING_HORIZON
 from gpf_nav.schema import ParameterError, Spec, check, coerce
 
 FILTER_GROUP = "Filter"
@@ -44,7 +45,8 @@ ESTIMATOR = [
         Spec("unmodelled_acceleration_time", 1.0e6, "gpf: correlation time of the unmodelled acceleration.", "s", "> 0", checked_by=_BY_FILTER),
         Spec("nominal_prior", 0.5, "gpf-single: prior probability that the model needs no unmodelled acceleration; the estimate averages the two hypotheses; 0 publishes the compensated posterior as it is.", bounds="[0, 1)", checked_by=_BY_FILTER),
         Spec("model_switch_time", 2.0e5, "gpf: mean sojourn time of the nominal / compensated model chain.", "s", "> 0", checked_by=_BY_FILTER),
-        Spec("kernel_bandwidth", 0.0, "gpf, cloud metric: kernel bandwidth h; 0: the default, 1.6 times the Gaussian-optimal one for N and the state dimension (at most 0.95).", bounds="[0, 1)", symbol="h", checked_by=_BY_FILTER),
+        Spec("kernel_bandwidth", 0.0, "gpf, cloud metric: kernel bandwidth h; 0: the default, the Gaussian-optimal one for N and the state dimension, 1.6 times it while an update is tempered or gated (gpf-single: 1.6 times it always; at most 0.95).", bounds="[0, 1)", symbol="h", checked_by=_BY_FILTER),
+        Spec("flattening_horizon", FLATTENING_HORIZON, "gpf: the update runs in coordinates where the measurement now and of the state flowed half this and this far ahead is linear, so the cloud keeps its spread along what the data cannot see; 0: the measurement now only.", "s", ">= 0", checked_by=_BY_FILTER),
         Spec("collapse_steps", 0, "gpf/spf: re-initialise after this many consecutive updates with ESS < 1.5 particles; 0 never.", bounds=">= 0", checked_by=_BY_FILTER),
         Spec("resampling", "systematic", "Resampling scheme.", choices=tuple(sorted(resampling.SCHEMES)), checked_by=_BY_FILTER),
         Spec("ess_threshold", 0.5, "Resample when ESS < tau N.", bounds="(0, 1]", symbol="tau", checked_by=_BY_FILTER),

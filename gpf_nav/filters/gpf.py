@@ -36,6 +36,7 @@ import math
 
 import numpy as np
 
+from gpf_nav.filters.flattening import flattening
 from gpf_nav.filters.compensated import (UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME,
                                          ModelErrorCompensated)
 from gpf_nav.filters.gating import OUTLIER_GATE, OUTLIER_GATE_LIMIT, InnovationGated
@@ -50,9 +51,6 @@ REFERENCES = ("innovation", "increment")
 METRICS = ("cloud", "euclidean", "process_noise")
 WEIGHTINGS = ("corrected", "likelihood")
 LINEARIZATIONS = ("mean", "flattened")
-FLATTENING_ITERATIONS = 3
-"""``linearization="flattened"``: fixed-point steps of the map back from the flattened coordinates
-(:meth:`GeometricProjectionPF._unflatten`)."""
 ILL_CONDITIONED = 1e12
 """Cloud metric: ``trace(S) / eps`` beyond which the projection is skipped (the update only weights)."""
 DEFAULT_REGULARIZATION = {"cloud": 1.0, "euclidean": 1e-6, "process_noise": 1e-6}
@@ -121,6 +119,12 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
             that linearisation, and maps the cloud back after it (:meth:`_begin_update`): a measurement
             curved in the state's coordinates (a range about a centre) then no longer narrows the cloud
             along the directions it cannot see (issue 23).
+        flattening_horizon: ``linearization="flattened"``: the flattened coordinates also make the
+            measured rows of the state flowed half this time and this time ahead linear (s; 0: the rows
+            measured now only), so the kernel's draws also keep what the dynamics will turn the
+            measurement into (:mod:`gpf_nav.filters.flattening`). Choose it well inside the time over
+            which the dynamics stay near their linearisation across the cloud (the navigation default,
+            :data:`gpf_nav.registry.NAVIGATION_GPF`, takes 100 s for the lunar descent).
         resampling: resampling scheme name.
         ess_threshold: tau in (0, 1].
         seed: seed of the filter's random generator.
@@ -137,7 +141,8 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
                  resampling: str = "systematic",
                  ess_threshold: float = 0.5, seed: int | np.random.Generator | None = None,
                  collapse_steps: int = 0, tempering_ess: float | None = None,
-                 observability_constraint: float | None = None, linearization: str = "mean"):
+                 observability_constraint: float | None = None, linearization: str = "mean",
+                 flattening_horizon: float = 0.0):
         if reference not in REFERENCES:
             raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r}")
         if weighting not in WEIGHTINGS:
@@ -146,6 +151,8 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
             raise ValueError(f"metric must be one of {METRICS}, got {metric!r}")
         if linearization not in LINEARIZATIONS:
             raise ValueError(f"linearization must be one of {LINEARIZATIONS}, got {linearization!r}")
+        if not (math.isfinite(flattening_horizon) and flattening_horizon >= 0.0):
+            raise ValueError(f"flattening_horizon must be a finite time >= 0, got {flattening_horizon}")
         if metric == "cloud" and reference == "increment":
             raise ValueError("reference='increment' needs metric 'euclidean' or 'process_noise'")
         if regularization is None:
@@ -182,6 +189,7 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         self._moment_target = None
         self.moment_matching = bool(moment_matching)
         self.linearization = linearization
+        self.flattening_horizon = float(flattening_horizon)
         self._flat = None
         self._init_gate(outlier_gate, outlier_gate_limit)  # (gating.py)
 
@@ -227,8 +235,8 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
             H = sensor.jacobian(mean[None], self.time)[0]  # (m, n), at the cloud's mean
             r = sensor.residual(y, sensor.measure(centres.T, self.time))  # (N, m)
         else:  # the measurement is linear in the flattened coordinates
-            H = flat[2]
-            r = sensor.residual(y, flat[1])[None] - (centres.T - flat[0]) @ H.T
+            H = flat.jacobian
+            r = sensor.residual(y, flat.measured)[None] - (centres.T - flat.mean) @ H.T
         whitened = self._whitened(H, r, rows, C)
         if whitened is None:
             self._set_costate(None, rows, dt)
@@ -281,25 +289,36 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
 
     def _begin_update(self, rows):
         """``linearization="flattened"``: move the predicted cloud to the flattened coordinates
-        ``xi = x + H^+ nu(x)`` (:meth:`_flattening`, :meth:`_curvature`), where the measured rows are exactly
-        ``h(m) + H (xi - m)``: the update is then the update of a linear measurement, for which the
-        kernel's straight-line draws, the one gain and the exact weights are right. Read on a range about
-        a centre, the curved shell of constant range becomes a plane, and a particle far along a rotation
-        about the centre is no longer drawn off the shell and weighted down (the kernel draws along the
-        tangent plane at the mean: a 20 km step moves the range by 109 m, 3.6 range sigmas)."""
+        (:mod:`gpf_nav.filters.flattening`), where the measured rows, now and at ``flattening_lags``
+        ahead, are exactly their linearisation at the cloud's mean: the update is then the update of a
+        linear measurement, for which the kernel's straight-line draws, the one gain and the exact weights
+        are right."""
         if self.metric != "cloud" or self.linearization != "flattened":
             return
-        flat = self._flattening(self._x, rows)
-        if flat is not None:
-            self._x = self._x + flat[3] @ self._curvature(self._x, flat).T
+        flat = flattening(self._x, self._weights, rows, self._sensor, self.model, self.time, self._input,
+                          self._flattening_lags, self.sensor_state_dim)
+        xi = None if flat is None else flat.flatten(self._x)
+        if xi is not None:
+            self._x = xi
             self._flat = flat
 
+    @property
+    def _flattening_lags(self) -> tuple[float, ...]:
+        """The times ahead the flattened coordinates also make the measured rows linear at, s."""
+        horizon = self.flattening_horizon
+        return (0.5 * horizon, horizon) if horizon > 0.0 else ()
+
     def _end_update(self):
-        self._unflatten()
+        """Map the cloud back from the flattened coordinates."""
+        flat, self._flat = self._flat, None
+        if flat is not None:
+            x = flat.unflatten(self._x)
+            if np.isfinite(x).all():
+                self._x = np.ascontiguousarray(x)
 
     def _constraint_jacobian(self):
         flat = self._flat
-        return None if flat is None else flat[2][flat[4]]
+        return None if flat is None else flat.jacobian[flat.rows]
 
     def _log_likelihood(self, x, y, rows):
         """In flattened coordinates, the likelihood of the measurement linearised at the cloud's mean (the
@@ -307,49 +326,11 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         flat = self._flat
         if flat is None:
             return super()._log_likelihood(x, y, rows)
-        mean, h_mean, H, _, _ = flat
-        e = self._sensor.residual(y, h_mean)[:, None] - H @ (x - mean[:, None])  # (m, N)
+        e = self._sensor.residual(y, flat.measured)[:, None] - flat.jacobian @ (x - flat.mean[:, None])  # (m, N)
         w, constant = self._whitening(rows)
         e = e if rows.all() else e[rows]
         ew = e * w[:, None] if w.ndim == 1 else w @ e
         return constant - 0.5 * np.einsum("kn,kn->n", ew, ew)
-
-    def _flattening(self, x, rows):
-        """``(m, h(m), H, H^+, rows)`` of the flattened coordinates of the cloud ``x`` ``(n, N)`` (None
-        when the Jacobian at its mean ``m`` is not of full row rank): ``H = dh/dx`` ``(m, n)`` at ``m``,
-        ``H^+ = H_r^T (H_r H_r^T)^-1`` of its measured ``rows`` ``H_r`` (the shortest move, in the state's
-        own units, that changes the measurement by a given amount)."""
-        sensor = self._sensor
-        mean = np.einsum("in,n->i", x, self._weights)
-        h, H = sensor.measure_and_jacobian(mean[None], self.time)
-        h, H = h[0], H[0]
-        measured = H[rows]
-        try:
-            pinv = np.linalg.solve(measured @ measured.T, measured).T
-        except np.linalg.LinAlgError:
-            return None
-        if not (np.isfinite(pinv).all() and np.isfinite(h).all() and np.isfinite(H).all()):
-            return None
-        return mean, h, H, pinv, rows
-
-    def _curvature(self, x, flat):
-        """``nu(x) = h(x) - h(m) - H (x - m)`` ``(N, k)`` of the measured rows (angles wrapped): what the
-        measurement of each particle ``x`` ``(n, N)`` departs from its linearisation at the cloud's mean."""
-        mean, h_mean, H, _, rows = flat
-        nu = self._sensor.residual(self._sensor.measure(x.T, self.time), h_mean[None]) - (x.T - mean) @ H.T
-        return nu if rows.all() else nu[:, rows]
-
-    def _unflatten(self):
-        """Map the cloud back from the flattened coordinates: ``x`` with ``x + H^+ nu(x) = xi``."""
-        flat, self._flat = self._flat, None
-        if flat is None:
-            return
-        xi = self._x
-        x = xi - flat[3] @ self._curvature(xi, flat).T
-        for _ in range(FLATTENING_ITERATIONS - 1):
-            x = xi - flat[3] @ self._curvature(x, flat).T
-        if np.isfinite(x).all():
-            self._x = np.ascontiguousarray(x)
 
     def _whitened(self, H: np.ndarray, r: np.ndarray, rows: np.ndarray, C: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:

@@ -1,0 +1,151 @@
+"""Flattened coordinates of a GPF update: where the measurement, now and along the flow, is linear.
+
+The cloud-metric update of :class:`~gpf_nav.filters.gpf.GeometricProjectionPF` draws its kernel along
+straight lines, gives every particle one gain and weights it exactly: all three are right for a linear
+measurement. A measurement curved in the state's coordinates (a range about a centre) breaks them along
+the directions it cannot see: a particle 20 km along a rotation about the centre, moved by a straight
+kernel draw, lands 109 m (3.6 range sigmas) off the shell of its range, is weighted down, and the cloud
+narrows where the data never looked (issue 23). The update therefore runs in the coordinates
+
+    xi = x + K nu(x),      nu(x) = g(x) - g(m) - J (x - m),
+
+where ``g`` stacks the measured rows now and the same rows of the state flowed ``lags`` seconds ahead,
+``J`` is its Jacobian at the cloud's mean ``m`` and ``K`` a right inverse of ``J`` that moves the user's
+state only (never a filter's own states, such as an estimated unmodelled acceleration). In ``xi`` every
+row of ``g`` is exactly its linearisation at ``m``, so a straight draw along the directions ``J`` does not
+see keeps the measurement now *and* the measurements the dynamics will turn it into (along a rotation of
+an orbit, the speed and the radial velocity: without them the kernel leaves the set of orbits with the
+same ranges, and the next measurements weigh the particles down).
+
+``K`` is built in two stages so that the rows measured now stay exact when the stack is not of full rank
+(a symmetry of the problem, such as the rotation about the polar axis without azimuth, is in the null
+space of every row): ``K_0 = J_0^+`` on the user's state, then the rows ahead within its null space by a
+noise-whitened pseudo-inverse truncated at :data:`RANK_TOLERANCE`. The map back solves ``x + K nu(x) = xi``
+by :data:`ITERATIONS` fixed-point steps.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gpf_nav.models.state_space import StateSpaceModel
+from gpf_nav.sensors.sensor import Sensor
+
+ITERATIONS = 3
+"""Most fixed-point steps of the map back (:meth:`Flattening.unflatten`)."""
+NEGLIGIBLE = 1e-3
+"""Curvature (in measurement noise standard deviations) below which the cloud is left in the state's
+coordinates (:meth:`Flattening.flatten`), and changes of it below which the map back has converged."""
+RANK_TOLERANCE = 1e-8
+"""Singular values of the noise-whitened rows ahead below this fraction of the largest are dropped."""
+
+
+@dataclass(frozen=True)
+class Flattening:
+    """The flattened coordinates of one update (built by :func:`flattening`).
+
+    Attributes:
+        mean: ``(n,)`` the cloud's weighted mean ``m``, the linearisation point.
+        measured: ``(m,)`` the measurement at ``m`` (every component).
+        jacobian: ``(m, n)`` its Jacobian at ``m``.
+        rows: ``(m,)`` bool, the measured components.
+        gain: ``(n, k + k L)`` the right inverse ``K`` of the stacked measured rows (``L`` lags).
+        noise_std: ``(k + k L,)`` their noise standard deviations.
+        steps: ``(L,)`` the flow's steps to the lags, s (the lags' differences).
+        ahead: per lag, the measurement ``(m,)`` and Jacobian ``(m, n)`` at ``m`` flowed to it.
+        time: the update's time, s.
+        sensor, model, input: what the rows are measured and flowed with.
+    """
+
+    mean: np.ndarray
+    measured: np.ndarray
+    jacobian: np.ndarray
+    rows: np.ndarray
+    gain: np.ndarray
+    noise_std: np.ndarray
+    steps: tuple[float, ...]
+    ahead: tuple[tuple[np.ndarray, np.ndarray], ...]
+    time: float
+    sensor: Sensor
+    model: StateSpaceModel
+    input: np.ndarray | None
+
+    def curvature(self, x: np.ndarray) -> np.ndarray:
+        """``nu(x)`` ``(N, k + k L)`` of the particles ``x`` ``(n, N)``: what each stacked measured row departs
+        from its linearisation at the mean (angles wrapped)."""
+        sensor, rows, offset = self.sensor, self.rows, x.T - self.mean
+        nu = [sensor.residual(sensor.measure(x.T, self.time), self.measured[None]) - offset @ self.jacobian.T]
+        flowed, t = x.T, self.time
+        for step, (measured, jacobian) in zip(self.steps, self.ahead):
+            flowed = self.model.transition(flowed, step, t, self.input)
+            t += step
+            nu.append(sensor.residual(sensor.measure(flowed, t), measured[None]) - offset @ jacobian.T)
+        stacked = np.hstack(nu)
+        return stacked if rows.all() else stacked[:, np.tile(rows, len(nu))]
+
+    def flatten(self, x: np.ndarray) -> np.ndarray | None:
+        """``xi`` ``(n, N)`` of the particles ``x`` ``(n, N)``; None when every particle's curvature is below
+        :data:`NEGLIGIBLE` (the coordinates are then the state's own, to that accuracy)."""
+        nu = self.curvature(x)
+        if not np.abs(nu / self.noise_std).max() >= NEGLIGIBLE:  # (NaN: nothing to flatten with)
+            return None
+        return x + self.gain @ nu.T
+
+    def unflatten(self, xi: np.ndarray) -> np.ndarray:
+        """The particles ``x`` ``(n, N)`` whose flattened coordinates are ``xi`` ``(n, N)``: fixed-point steps
+        ``x <- xi - K nu(x)`` until the curvature changes by less than :data:`NEGLIGIBLE` (at most
+        :data:`ITERATIONS`)."""
+        nu = self.curvature(xi)
+        x = xi - self.gain @ nu.T
+        for _ in range(ITERATIONS - 1):
+            previous, nu = nu, self.curvature(x)
+            x = xi - self.gain @ nu.T
+            if not np.abs((nu - previous) / self.noise_std).max() >= NEGLIGIBLE:
+                break
+        return x
+
+
+def flattening(x: np.ndarray, weights: np.ndarray, rows: np.ndarray, sensor: Sensor, model: StateSpaceModel,
+               time: float, u: np.ndarray | None, lags: tuple[float, ...], user_dim: int
+               ) -> Flattening | None:
+    """The flattened coordinates of the cloud ``x`` ``(n, N)`` with normalised ``weights`` ``(N,)`` for the
+    measured ``rows`` ``(m,)`` of ``sensor`` at ``time``, flowed by ``model`` with the input ``u`` held to
+    the increasing ``lags`` (s; none: the rows measured now only), moving the first ``user_dim``
+    components of the state only. None when the rows measured now are not of full rank at the mean or
+    anything is non-finite."""
+    mean = np.einsum("in,n->i", x, weights)
+    h, H = sensor.measure_and_jacobian(mean[None], time)
+    h, H = h[0], H[0]
+    now = H[rows][:, :user_dim]  # (k, n_user)
+    try:
+        first = np.linalg.solve(now @ now.T, now).T  # (n_user, k): J_0^+ on the user's state
+    except np.linalg.LinAlgError:
+        return None
+    n = x.shape[0]
+    k = int(rows.sum())
+    gain = np.zeros((n, k * (1 + len(lags))))
+    noise_std = np.sqrt(np.tile(np.diag(sensor.noise(time))[rows], 1 + len(lags)))
+    gain[:user_dim, :k] = first
+    steps = tuple(np.diff((0.0, *lags)).tolist())
+    ahead = []
+    if lags:
+        flowed, t, F = mean[None], time, np.eye(n)
+        for step in steps:
+            F = model.transition_jacobian(flowed, step, t, u)[0] @ F
+            flowed = model.transition(flowed, step, t, u)
+            t += step
+            measured, jacobian = sensor.measure_and_jacobian(flowed, t)
+            ahead.append((measured[0], jacobian[0] @ F))
+        later = np.vstack([jacobian[rows] for _, jacobian in ahead])[:, :user_dim]  # (k L, n_user)
+        # the rows ahead within the null space of the rows now: K = [J_0^+ - A^+ J_L J_0^+, A^+]
+        A = (later - (later @ first) @ now) / noise_std[k:, None]
+        U, s, Vt = np.linalg.svd(A, full_matrices=False)
+        keep = s > RANK_TOLERANCE * s[0] if s.size and s[0] > 0.0 else np.zeros(s.size, bool)
+        inverse = (Vt[keep].T / s[keep]) @ U[:, keep].T / noise_std[k:]  # (n_user, k L)
+        gain[:user_dim, :k] -= inverse @ (later @ first)
+        gain[:user_dim, k:] = inverse
+    arrays = (h, H, gain, *(a for pair in ahead for a in pair))
+    if not all(np.isfinite(a).all() for a in arrays):
+        return None
+    return Flattening(mean, h, H, rows, gain, noise_std, steps, tuple(ahead), float(time), sensor, model, u)
