@@ -126,6 +126,34 @@ def test_the_lunar_report_names_the_rotations_about_the_centre(case, d):
         assert np.linalg.svd(a.T @ b, compute_uv=False).min() > 0.99
 
 
+@pytest.mark.parametrize("rebuild", [True, False])
+def test_a_moved_reference_keeps_the_polar_rotation_undetermined(monkeypatch, rebuild):
+    """Case 2 with the 9 % gravity error: the nominal model's reference drifts and is moved to the filter's
+    mean; rebuilt along the model's trajectory through the new reference, the polar rotation (which no
+    measurement sees) stays undetermined. Moved but not rebuilt (the tracker before), the Jacobians turn
+    against the carried information and the rotation reads as determined."""
+    from gpf_nav.integrity import observability
+    if not rebuild:
+        monkeypatch.setattr(ObservabilityTracker, "_rebuild", lambda self: None)
+    config = ScenarioConfig(case="partial", epsilon=0.09, duration=700.0)
+    scenario = generate(config, 1)
+    flt = ExtendedKF(filter_model(config))
+    flt.initialize(scenario.prior_mean, scenario.prior_cov)
+    for k in range(scenario.times.size):
+        flt.predict(config.dt)
+        flt.update(scenario.measurements[k])
+    assert flt._observability.reanchors >= 1
+    report = flt.observability
+    if rebuild:
+        assert report.undetermined == 1 and report.information[0] < 1e-2 * observability.UNDETERMINED_INFORMATION
+        expected = undetermined_subspace(config, scenario.truth[-1])
+        a = np.linalg.qr(expected / report.scale[:6, None])[0]
+        b = np.linalg.qr(report.directions[:, :6].T / report.scale[:6, None])[0]
+        assert np.linalg.svd(a.T @ b, compute_uv=False).min() > 0.99
+    else:
+        assert report.information[0] > observability.UNDETERMINED_INFORMATION
+
+
 def test_the_constrained_gpf_keeps_the_range_only_rotations_that_the_unconstrained_one_narrows():
     """A 20 km / 20 m/s prior, range only: along the rotations the constrained GPF's covariance stays at
     the prior's size; switched off (``observability_constraint=0``), the same filter narrows them."""
