@@ -289,10 +289,11 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
 
     def _begin_update(self, rows):
         """``linearization="flattened"``: move the predicted cloud to the flattened coordinates
-        (:mod:`gpf_nav.filters.flattening`), where the measured rows, now and at ``flattening_lags``
-        ahead, are exactly their linearisation at the cloud's mean: the update is then the update of a
-        linear measurement, for which the kernel's straight-line draws, the one gain and the exact weights
-        are right."""
+        (:mod:`gpf_nav.filters.flattening`), where the measured rows, now and of the state flowed half the
+        ``flattening_horizon`` and the whole of it ahead, are exactly their linearisation at the cloud's
+        mean: the update is then the update of a linear measurement, for which the kernel's straight-line
+        draws, the one gain and the exact weights are right. A cloud whose curvature is negligible stays
+        in the state's coordinates."""
         if self.metric != "cloud" or self.linearization != "flattened":
             return
         flat = flattening(self._x, self._weights, rows, self._sensor, self.model, self.time, self._input,
