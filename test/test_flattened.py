@@ -144,3 +144,23 @@ def test_a_straight_draw_in_the_flow_flattened_coordinates_keeps_the_ranges_ahea
 def test_a_negative_flattening_horizon_is_refused():
     with pytest.raises(ValueError, match="flattening_horizon"):
         GeometricProjectionPF(_linear_model(), 10, linearization="flattened", flattening_horizon=-1.0)
+
+
+def test_the_flattened_coordinates_move_the_users_states_only():
+    """With a range-bias state and the estimated acceleration appended, the flattening moves position and
+    velocity only: a range's curvature shared with its bias made the rae-only bias estimate -85 m for a
+    true +60 m (the sensor campaign with an estimated range bias)."""
+    from gpf_nav.sensors.bias import SensorBiasModel
+    from gpf_nav.sensors.sensor import random_constant_bias
+
+    config, model, _, _ = _range_only_cloud()
+    biased = SensorBiasModel(model, [ModelSensor(model, "rae", bias=random_constant_bias([60.0, 0.0, 0.0]))])
+    flt = GeometricProjectionPF(biased, 200, seed=1, linearization="flattened", flattening_horizon=100.0)
+    assert flt.model.state_dim == 10 and flt.model.base_state_dim == biased.base_state_dim == 6
+    scenario = generate(config, 2)
+    mean, cov = biased.augment_prior(scenario.prior_mean, scenario.prior_cov)
+    flt.initialize(mean, cov)
+    flt.predict(config.dt)
+    flt._begin_update(np.array([True, False, False]))
+    assert flt._flat is not None
+    assert np.abs(flt._flat.gain[:6]).max() > 0.0 and not flt._flat.gain[6:].any()

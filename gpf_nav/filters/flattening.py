@@ -11,7 +11,9 @@ narrows where the data never looked (issue 23). The update therefore runs in the
 
 where ``g`` stacks the measured rows now and the same rows of the state flowed ``lags`` seconds ahead,
 ``J`` is its Jacobian at the cloud's mean ``m`` and ``K`` a right inverse of ``J`` that moves the user's
-state only (never a filter's own states, such as an estimated unmodelled acceleration). In ``xi`` every
+own model's states only (never the states a filter appends, an estimated unmodelled acceleration or a
+sensor bias: in the state's units, the rows ahead would put most of the move into the acceleration, and
+a range's curvature would be shared with its bias). In ``xi`` every
 row of ``g`` is exactly its linearisation at ``m``, so a straight draw along the directions ``J`` does not
 see keeps the measurement now *and* the measurements the dynamics will turn it into (along a rotation of
 an orbit, the speed and the radial velocity: without them the kernel leaves the set of orbits with the

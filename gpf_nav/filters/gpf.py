@@ -297,7 +297,7 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         if self.metric != "cloud" or self.linearization != "flattened":
             return
         flat = flattening(self._x, self._weights, rows, self._sensor, self.model, self.time, self._input,
-                          self._flattening_lags, self.sensor_state_dim)
+                          self._flattening_lags, self.model.base_state_dim)
         xi = None if flat is None else flat.flatten(self._x)
         if xi is not None:
             self._x = xi

@@ -198,6 +198,11 @@ class ModelErrorCompensation(StateSpaceModel):
     def time_varying_noise(self) -> bool:
         return self.base.time_varying_noise
 
+    @property
+    def base_state_dim(self) -> int:
+        """The user's model's states (this model's own are appended after them)."""
+        return self.base.base_state_dim
+
     def process_noise(self, dt, t=0.0):
         """Base ``Q`` over ``[t, t + dt]`` plus the Gauss-Markov part; cached for the last ``dt`` (and the
         last ``t`` when the base model's noise varies with time, see ``time_varying_noise``)."""

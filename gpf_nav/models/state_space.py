@@ -79,6 +79,9 @@ class StateSpaceModel(ABC):
         orthogonal_jacobian_rows: the rows of ``H`` are mutually orthogonal everywhere (true of
             range/azimuth/elevation, the gradients of spherical coordinates); lets the projection
             replace its small solve by a division when ``R`` is diagonal.
+        base_state_dim: the leading states that are the user's own model's (:attr:`state_dim` unless the
+            model appends states of its own, as the compensation and the sensor-bias models do); the
+            GPF's flattened coordinates move these only.
 
     A discrete-time model (``x_{k+1} = F(x_k, k) + w_k``) is written as ``transition`` ignoring ``dt``
     (the filter is then driven with ``predict(1.0)``, so ``t`` counts steps), ``process_noise`` the
@@ -100,6 +103,11 @@ class StateSpaceModel(ABC):
     velocity_index: tuple[int, ...] = ()
     measured_state_index: tuple[int, ...] | None = None
     orthogonal_jacobian_rows: bool = False
+
+    @property
+    def base_state_dim(self) -> int:
+        """The leading states of the user's own model: all of them, for a model that appends none."""
+        return self.state_dim
 
     @abstractmethod
     def drift(self, x: np.ndarray, t: float = 0.0, u: np.ndarray | None = None) -> np.ndarray:

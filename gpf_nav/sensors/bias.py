@@ -138,6 +138,11 @@ class SensorBiasModel(StateSpaceModel):
     def time_varying_noise(self) -> bool:
         return self.base.time_varying_noise
 
+    @property
+    def base_state_dim(self) -> int:
+        """The user's model's states (this model's own are appended after them)."""
+        return self.base.base_state_dim
+
     def drift(self, x, t=0.0, u=None):
         return np.concatenate([self.base.drift(x[:, :self._n], t, u), -x[:, self._n:] / self.bias_time], axis=1)
 
