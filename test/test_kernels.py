@@ -109,6 +109,26 @@ def test_orbit_frames_and_push_are_the_numpy_ones(count):
     _close(moved, expected, atol=1e-15)
 
 
+@pytest.mark.parametrize("count", SIZES)
+def test_the_parallel_orbit_loops_are_the_serial_ones_bit_for_bit(count):
+    """The loops that run on every core from ``PARALLEL`` particles (called here directly, at any N) give
+    the serial loops' numbers exactly, degenerate orbits and per-particle inputs included."""
+    rng = np.random.default_rng(60 + count)
+    x = _orbits(rng, count)
+    for u in (np.zeros((3, 1)), np.ascontiguousarray(rng.standard_normal((3, count)))):
+        np.testing.assert_array_equal(orbit._leapfrog_parallel(x, MU_MOON, 10.0, 3, u),
+                                      orbit._leapfrog_serial(x, MU_MOON, 10.0, 3, u))
+    frame = orbit._frames_serial(x)
+    np.testing.assert_array_equal(orbit._frames_parallel(x), frame)
+    a = np.ascontiguousarray(rng.standard_normal((3, count)))
+    moved = np.ascontiguousarray(rng.standard_normal((9, count)))
+    serial, parallel = moved.copy(), moved.copy()
+    for rows in (np.arange(3), np.arange(0)):
+        orbit._push_serial(serial, frame, a, np.arange(3, 6), rows, 2.0, 2.5)
+        orbit._push_parallel(parallel, frame, a, np.arange(3, 6), rows, 2.0, 2.5)
+        np.testing.assert_array_equal(parallel, serial)
+
+
 def test_compensated_lunar_transition_is_the_numpy_one():
     rng = np.random.default_rng(50)
     model = ModelErrorCompensation(LunarDescentModel(), 1e6, 0.1)

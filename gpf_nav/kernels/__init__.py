@@ -12,11 +12,16 @@ once. A user's own model never goes through a kernel.
 
 The filters' products of a small matrix with the whole cloud (the GPF's proposal draw, the moment map)
 stay BLAS calls: kernels written for them were 1.1 to 2 times slower at N = 10 000 and 100 000. The
-kernels are serial: on the 2-core machine they were measured on, shared with other work, numba's
-parallel loops (``prange`` over blocks of particles, OpenMP or workqueue threads) were never faster than
-the serial loops at N = 100 000, and up to 8 times slower.
+kernels that are arithmetic per particle (the lunar flow, its orbit frames and the acceleration pushed
+through them) run their particles on every core from :data:`PARALLEL` particles, with the arithmetic of
+the serial loop (bit for bit). Below it they stay serial: on the 2-core machine they were measured on,
+next to two busy processes, the parallel flow was 4 times slower at N = 500 and 1.6 times at 10 000,
+and 1.7 times faster at 100 000. The moments stay serial at every N (parallel moments were never faster
+there, and up to 8 times slower).
 """
 
 CHUNK = 256
 """Particles a kernel works on at a time (rows of this length stay in the first-level cache, and loops
 over them vectorise)."""
+PARALLEL = 50_000
+"""Particles from which the per-particle kernels (:mod:`gpf_nav.kernels.orbit`) use every core."""

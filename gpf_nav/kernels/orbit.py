@@ -10,7 +10,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
+
+from gpf_nav.kernels import PARALLEL
 
 
 MIN_RANGE_SQ = 1.0
@@ -47,21 +49,40 @@ def _substep(r0, r1, r2, v0, v1, v2, a0, a1, a2, gm, h, u0, u1, u2):
 
 
 @njit(cache=True, error_model="numpy")
-def leapfrog(x: np.ndarray, gm: float, h: float, steps: int, u: np.ndarray) -> np.ndarray:
-    """Kick-drift-kick leapfrog of ``steps`` sub-steps ``h`` under two-body gravity ``gm`` plus the specific
-    force ``u`` ``(3, K)``, from the states ``x`` ``(6, N)`` (C-contiguous): the new states ``(6, N)``."""
+def _leapfrog_particle(x, j, gm, h, steps, u, out):
+    """:func:`leapfrog` of particle ``j`` of ``x`` into ``out``."""
+    ju = j * (u.shape[1] > 1)  # (not ``j if ... else 0``: a parallel loop's unsigned j and 0 unify to a float)
+    u0, u1, u2 = u[0, ju], u[1, ju], u[2, ju]
+    r0, r1, r2, v0, v1, v2 = x[0, j], x[1, j], x[2, j], x[3, j], x[4, j], x[5, j]
+    k = _gravity(r0, r1, r2, gm)
+    a0, a1, a2 = r0 * k + u0, r1 * k + u1, r2 * k + u2
+    for _ in range(steps):
+        r0, r1, r2, v0, v1, v2, a0, a1, a2 = _substep(r0, r1, r2, v0, v1, v2, a0, a1, a2, gm, h, u0, u1, u2)
+    out[0, j], out[1, j], out[2, j] = r0, r1, r2
+    out[3, j], out[4, j], out[5, j] = v0, v1, v2
+
+
+@njit(cache=True, error_model="numpy")
+def _leapfrog_serial(x, gm, h, steps, u):
     out = np.empty((6, x.shape[1]))
     for j in range(x.shape[1]):
-        ju = j if u.shape[1] > 1 else 0
-        u0, u1, u2 = u[0, ju], u[1, ju], u[2, ju]
-        r0, r1, r2, v0, v1, v2 = x[0, j], x[1, j], x[2, j], x[3, j], x[4, j], x[5, j]
-        k = _gravity(r0, r1, r2, gm)
-        a0, a1, a2 = r0 * k + u0, r1 * k + u1, r2 * k + u2
-        for _ in range(steps):
-            r0, r1, r2, v0, v1, v2, a0, a1, a2 = _substep(r0, r1, r2, v0, v1, v2, a0, a1, a2, gm, h, u0, u1, u2)
-        out[0, j], out[1, j], out[2, j] = r0, r1, r2
-        out[3, j], out[4, j], out[5, j] = v0, v1, v2
+        _leapfrog_particle(x, j, gm, h, steps, u, out)
     return out
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def _leapfrog_parallel(x, gm, h, steps, u):
+    out = np.empty((6, x.shape[1]))
+    for j in prange(x.shape[1]):
+        _leapfrog_particle(x, j, gm, h, steps, u, out)
+    return out
+
+
+def leapfrog(x: np.ndarray, gm: float, h: float, steps: int, u: np.ndarray) -> np.ndarray:
+    """Kick-drift-kick leapfrog of ``steps`` sub-steps ``h`` under two-body gravity ``gm`` plus the specific
+    force ``u`` ``(3, K)``, from the states ``x`` ``(6, N)`` (C-contiguous): the new states ``(6, N)`` (on
+    every core from :data:`~gpf_nav.kernels.PARALLEL` particles)."""
+    return (_leapfrog_parallel if x.shape[1] >= PARALLEL else _leapfrog_serial)(x, gm, h, steps, u)
 
 
 @njit(cache=True, error_model="numpy")
@@ -117,52 +138,89 @@ def leapfrog_jacobian(x: np.ndarray, gm: float, h: float, steps: int, u: np.ndar
 
 
 @njit(cache=True, error_model="numpy")
+def _frame_particle(x, j, frame):
+    """:func:`frames` of particle ``j`` of ``x`` into ``frame``."""
+    r0, r1, r2, v0, v1, v2 = x[0, j], x[1, j], x[2, j], x[3, j], x[4, j], x[5, j]
+    size_r = max(math.sqrt(r0 * r0 + r1 * r1 + r2 * r2), MIN_RANGE)
+    a0, a1, a2 = r0 / size_r, r1 / size_r, r2 / size_r
+    n0, n1, n2 = a1 * v2 - a2 * v1, a2 * v0 - a0 * v2, a0 * v1 - a1 * v0
+    size = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    if size > 1e-12 * max(math.sqrt(v0 * v0 + v1 * v1 + v2 * v2), 1.0):
+        n0, n1, n2 = n0 / size, n1 / size, n2 / size
+        along = a0 * v0 + a1 * v1 + a2 * v2
+        t0, t1, t2 = (v0 - a0 * along) / size, (v1 - a1 * along) / size, (v2 - a2 * along) / size
+    else:  # no orbit plane: any axis normal to r, with the least-aligned base axis
+        m0, m1, m2 = abs(a0), abs(a1), abs(a2)
+        b = 0 if (m0 <= m1 and m0 <= m2) else (1 if m1 <= m2 else 2)
+        e0, e1, e2 = (1.0 if b == 0 else 0.0), (1.0 if b == 1 else 0.0), (1.0 if b == 2 else 0.0)
+        n0, n1, n2 = a1 * e2 - a2 * e1, a2 * e0 - a0 * e2, a0 * e1 - a1 * e0
+        size = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        n0, n1, n2 = n0 / size, n1 / size, n2 / size
+        t0, t1, t2 = n1 * a2 - n2 * a1, n2 * a0 - n0 * a2, n0 * a1 - n1 * a0
+    axes = (a0, a1, a2, t0, t1, t2, n0, n1, n2)
+    finite = True
+    for value in axes:
+        finite = finite and math.isfinite(value)
+    for c in range(3):
+        for axis in range(3):
+            frame[c, axis, j] = axes[3 * axis + c] if finite else (1.0 if c == axis else 0.0)
+
+
+@njit(cache=True, error_model="numpy")
+def _frames_serial(x):
+    frame = np.empty((3, 3, x.shape[1]))
+    for j in range(x.shape[1]):
+        _frame_particle(x, j, frame)
+    return frame
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def _frames_parallel(x):
+    frame = np.empty((3, 3, x.shape[1]))
+    for j in prange(x.shape[1]):
+        _frame_particle(x, j, frame)
+    return frame
+
+
 def frames(x: np.ndarray) -> np.ndarray:
     """Radial, along-track and cross-track axes ``(3, 3, N)`` (component, axis, particle) of the osculating
     orbits of ``x`` ``(6, N)`` (C-contiguous); where the orbit plane is undefined the cross-track axis is
     the cross product of the radial axis with the least-aligned base axis, and where no frame results
-    (``r = 0``, a non-finite state) the frame is the world's."""
-    frame = np.empty((3, 3, x.shape[1]))
-    for j in range(x.shape[1]):
-        r0, r1, r2, v0, v1, v2 = x[0, j], x[1, j], x[2, j], x[3, j], x[4, j], x[5, j]
-        size_r = max(math.sqrt(r0 * r0 + r1 * r1 + r2 * r2), MIN_RANGE)
-        a0, a1, a2 = r0 / size_r, r1 / size_r, r2 / size_r
-        n0, n1, n2 = a1 * v2 - a2 * v1, a2 * v0 - a0 * v2, a0 * v1 - a1 * v0
-        size = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
-        if size > 1e-12 * max(math.sqrt(v0 * v0 + v1 * v1 + v2 * v2), 1.0):
-            n0, n1, n2 = n0 / size, n1 / size, n2 / size
-            along = a0 * v0 + a1 * v1 + a2 * v2
-            t0, t1, t2 = (v0 - a0 * along) / size, (v1 - a1 * along) / size, (v2 - a2 * along) / size
-        else:  # no orbit plane: any axis normal to r, with the least-aligned base axis
-            m0, m1, m2 = abs(a0), abs(a1), abs(a2)
-            b = 0 if (m0 <= m1 and m0 <= m2) else (1 if m1 <= m2 else 2)
-            e0, e1, e2 = (1.0 if b == 0 else 0.0), (1.0 if b == 1 else 0.0), (1.0 if b == 2 else 0.0)
-            n0, n1, n2 = a1 * e2 - a2 * e1, a2 * e0 - a0 * e2, a0 * e1 - a1 * e0
-            size = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
-            n0, n1, n2 = n0 / size, n1 / size, n2 / size
-            t0, t1, t2 = n1 * a2 - n2 * a1, n2 * a0 - n0 * a2, n0 * a1 - n1 * a0
-        axes = (a0, a1, a2, t0, t1, t2, n0, n1, n2)
-        finite = True
-        for value in axes:
-            finite = finite and math.isfinite(value)
-        for c in range(3):
-            for axis in range(3):
-                frame[c, axis, j] = axes[3 * axis + c] if finite else (1.0 if c == axis else 0.0)
-    return frame
+    (``r = 0``, a non-finite state) the frame is the world's (on every core from
+    :data:`~gpf_nav.kernels.PARALLEL` particles)."""
+    return (_frames_parallel if x.shape[1] >= PARALLEL else _frames_serial)(x)
 
 
 @njit(cache=True, error_model="numpy")
+def _push_particle(moved, frame, a, driven, integrated, velocity_gain, position_gain, j):
+    """:func:`push` of particle ``j``."""
+    p = a.shape[0]
+    for i in range(p):
+        s = 0.0
+        for k in range(p):
+            s += frame[i, k, j] * a[k, j]
+        moved[driven[i], j] += s * velocity_gain
+        if integrated.size:
+            moved[integrated[i], j] += s * position_gain
+
+
+@njit(cache=True, error_model="numpy")
+def _push_serial(moved, frame, a, driven, integrated, velocity_gain, position_gain):
+    for j in range(a.shape[1]):
+        _push_particle(moved, frame, a, driven, integrated, velocity_gain, position_gain, j)
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def _push_parallel(moved, frame, a, driven, integrated, velocity_gain, position_gain):
+    for j in prange(a.shape[1]):
+        _push_particle(moved, frame, a, driven, integrated, velocity_gain, position_gain, j)
+
+
 def push(moved: np.ndarray, frame: np.ndarray, a: np.ndarray, driven: np.ndarray, integrated: np.ndarray,
          velocity_gain: float, position_gain: float) -> None:
     """Add the acceleration ``a`` ``(p, N)``, given in the local ``frame`` ``(p, p, N)``, to the states
     ``moved`` ``(n, N)`` in place: ``F a`` times ``velocity_gain`` onto the rows ``driven`` ``(p,)`` and times
-    ``position_gain`` onto the rows ``integrated`` ``(p,)`` (empty: none)."""
-    p = a.shape[0]
-    for j in range(a.shape[1]):
-        for i in range(p):
-            s = 0.0
-            for k in range(p):
-                s += frame[i, k, j] * a[k, j]
-            moved[driven[i], j] += s * velocity_gain
-            if integrated.size:
-                moved[integrated[i], j] += s * position_gain
+    ``position_gain`` onto the rows ``integrated`` ``(p,)`` (empty: none; on every core from
+    :data:`~gpf_nav.kernels.PARALLEL` particles)."""
+    kernel = _push_parallel if a.shape[1] >= PARALLEL else _push_serial
+    kernel(moved, frame, a, driven, integrated, velocity_gain, position_gain)
