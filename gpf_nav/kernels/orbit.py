@@ -12,7 +12,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from gpf_nav.kernels import PARALLEL
+from gpf_nav.kernels import CHUNK, PARALLEL
 
 
 MIN_RANGE_SQ = 1.0
@@ -49,32 +49,47 @@ def _substep(r0, r1, r2, v0, v1, v2, a0, a1, a2, gm, h, u0, u1, u2):
 
 
 @njit(cache=True, error_model="numpy")
-def _leapfrog_particle(x, j, gm, h, steps, u, out):
-    """:func:`leapfrog` of particle ``j`` of ``x`` into ``out``."""
-    ju = j * (u.shape[1] > 1)  # (not ``j if ... else 0``: a parallel loop's unsigned j and 0 unify to a float)
-    u0, u1, u2 = u[0, ju], u[1, ju], u[2, ju]
-    r0, r1, r2, v0, v1, v2 = x[0, j], x[1, j], x[2, j], x[3, j], x[4, j], x[5, j]
-    k = _gravity(r0, r1, r2, gm)
-    a0, a1, a2 = r0 * k + u0, r1 * k + u1, r2 * k + u2
+def _leapfrog_block(x, gm, h, steps, u, start, buffer, out):
+    """:func:`leapfrog` of the particles ``start`` to ``start + CHUNK`` of ``x`` into ``out``, through the
+    rows of ``buffer`` ``(12, CHUNK)``: each sub-step runs over the whole block, a loop that vectorises
+    (the sub-steps of one particle are a chain of dependent square roots and divisions)."""
+    size = min(buffer.shape[1], x.shape[1] - start)
+    r0, r1, r2, v0, v1, v2 = buffer[0], buffer[1], buffer[2], buffer[3], buffer[4], buffer[5]
+    a0, a1, a2, u0, u1, u2 = buffer[6], buffer[7], buffer[8], buffer[9], buffer[10], buffer[11]
+    each = u.shape[1] > 1
+    for t in range(size):
+        j = start + t
+        ju = j * each  # (not ``j if each else 0``: a parallel loop's unsigned j and 0 unify to a float)
+        u0[t], u1[t], u2[t] = u[0, ju], u[1, ju], u[2, ju]
+        r0[t], r1[t], r2[t] = x[0, j], x[1, j], x[2, j]
+        v0[t], v1[t], v2[t] = x[3, j], x[4, j], x[5, j]
+    for t in range(size):
+        k = _gravity(r0[t], r1[t], r2[t], gm)
+        a0[t], a1[t], a2[t] = r0[t] * k + u0[t], r1[t] * k + u1[t], r2[t] * k + u2[t]
     for _ in range(steps):
-        r0, r1, r2, v0, v1, v2, a0, a1, a2 = _substep(r0, r1, r2, v0, v1, v2, a0, a1, a2, gm, h, u0, u1, u2)
-    out[0, j], out[1, j], out[2, j] = r0, r1, r2
-    out[3, j], out[4, j], out[5, j] = v0, v1, v2
+        for t in range(size):
+            r0[t], r1[t], r2[t], v0[t], v1[t], v2[t], a0[t], a1[t], a2[t] = _substep(
+                r0[t], r1[t], r2[t], v0[t], v1[t], v2[t], a0[t], a1[t], a2[t], gm, h, u0[t], u1[t], u2[t])
+    for t in range(size):
+        j = start + t
+        out[0, j], out[1, j], out[2, j] = r0[t], r1[t], r2[t]
+        out[3, j], out[4, j], out[5, j] = v0[t], v1[t], v2[t]
 
 
 @njit(cache=True, error_model="numpy")
 def _leapfrog_serial(x, gm, h, steps, u):
     out = np.empty((6, x.shape[1]))
-    for j in range(x.shape[1]):
-        _leapfrog_particle(x, j, gm, h, steps, u, out)
+    buffer = np.empty((12, CHUNK))
+    for start in range(0, x.shape[1], CHUNK):
+        _leapfrog_block(x, gm, h, steps, u, start, buffer, out)
     return out
 
 
 @njit(cache=True, error_model="numpy", parallel=True)
 def _leapfrog_parallel(x, gm, h, steps, u):
     out = np.empty((6, x.shape[1]))
-    for j in prange(x.shape[1]):
-        _leapfrog_particle(x, j, gm, h, steps, u, out)
+    for block in prange((x.shape[1] + CHUNK - 1) // CHUNK):
+        _leapfrog_block(x, gm, h, steps, u, block * CHUNK, np.empty((12, CHUNK)), out)
     return out
 
 
