@@ -153,47 +153,47 @@ def leapfrog_jacobian(x: np.ndarray, gm: float, h: float, steps: int, u: np.ndar
 
 
 @njit(cache=True, error_model="numpy")
-def _frame_particle(x, j, frame):
-    """:func:`frames` of particle ``j`` of ``x`` into ``frame``."""
-    r0, r1, r2, v0, v1, v2 = x[0, j], x[1, j], x[2, j], x[3, j], x[4, j], x[5, j]
-    size_r = max(math.sqrt(r0 * r0 + r1 * r1 + r2 * r2), MIN_RANGE)
-    a0, a1, a2 = r0 / size_r, r1 / size_r, r2 / size_r
-    n0, n1, n2 = a1 * v2 - a2 * v1, a2 * v0 - a0 * v2, a0 * v1 - a1 * v0
-    size = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
-    if size > 1e-12 * max(math.sqrt(v0 * v0 + v1 * v1 + v2 * v2), 1.0):
-        n0, n1, n2 = n0 / size, n1 / size, n2 / size
-        along = a0 * v0 + a1 * v1 + a2 * v2
-        t0, t1, t2 = (v0 - a0 * along) / size, (v1 - a1 * along) / size, (v2 - a2 * along) / size
-    else:  # no orbit plane: any axis normal to r, with the least-aligned base axis
-        m0, m1, m2 = abs(a0), abs(a1), abs(a2)
-        b = 0 if (m0 <= m1 and m0 <= m2) else (1 if m1 <= m2 else 2)
-        e0, e1, e2 = (1.0 if b == 0 else 0.0), (1.0 if b == 1 else 0.0), (1.0 if b == 2 else 0.0)
-        n0, n1, n2 = a1 * e2 - a2 * e1, a2 * e0 - a0 * e2, a0 * e1 - a1 * e0
+def _frames_block(x, start, stop, frame):
+    """:func:`frames` of the particles ``start`` to ``stop`` of ``x`` into ``frame``."""
+    for j in range(start, stop):
+        r0, r1, r2, v0, v1, v2 = x[0, j], x[1, j], x[2, j], x[3, j], x[4, j], x[5, j]
+        size_r = max(math.sqrt(r0 * r0 + r1 * r1 + r2 * r2), MIN_RANGE)
+        a0, a1, a2 = r0 / size_r, r1 / size_r, r2 / size_r
+        n0, n1, n2 = a1 * v2 - a2 * v1, a2 * v0 - a0 * v2, a0 * v1 - a1 * v0
         size = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
-        n0, n1, n2 = n0 / size, n1 / size, n2 / size
-        t0, t1, t2 = n1 * a2 - n2 * a1, n2 * a0 - n0 * a2, n0 * a1 - n1 * a0
-    axes = (a0, a1, a2, t0, t1, t2, n0, n1, n2)
-    finite = True
-    for value in axes:
-        finite = finite and math.isfinite(value)
-    for c in range(3):
-        for axis in range(3):
-            frame[c, axis, j] = axes[3 * axis + c] if finite else (1.0 if c == axis else 0.0)
+        if size > 1e-12 * max(math.sqrt(v0 * v0 + v1 * v1 + v2 * v2), 1.0):
+            n0, n1, n2 = n0 / size, n1 / size, n2 / size
+            along = a0 * v0 + a1 * v1 + a2 * v2
+            t0, t1, t2 = (v0 - a0 * along) / size, (v1 - a1 * along) / size, (v2 - a2 * along) / size
+        else:  # no orbit plane: any axis normal to r, with the least-aligned base axis
+            m0, m1, m2 = abs(a0), abs(a1), abs(a2)
+            b = 0 if (m0 <= m1 and m0 <= m2) else (1 if m1 <= m2 else 2)
+            e0, e1, e2 = (1.0 if b == 0 else 0.0), (1.0 if b == 1 else 0.0), (1.0 if b == 2 else 0.0)
+            n0, n1, n2 = a1 * e2 - a2 * e1, a2 * e0 - a0 * e2, a0 * e1 - a1 * e0
+            size = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+            n0, n1, n2 = n0 / size, n1 / size, n2 / size
+            t0, t1, t2 = n1 * a2 - n2 * a1, n2 * a0 - n0 * a2, n0 * a1 - n1 * a0
+        axes = (a0, a1, a2, t0, t1, t2, n0, n1, n2)
+        finite = True
+        for value in axes:
+            finite = finite and math.isfinite(value)
+        for c in range(3):
+            for axis in range(3):
+                frame[c, axis, j] = axes[3 * axis + c] if finite else (1.0 if c == axis else 0.0)
 
 
 @njit(cache=True, error_model="numpy")
 def _frames_serial(x):
     frame = np.empty((3, 3, x.shape[1]))
-    for j in range(x.shape[1]):
-        _frame_particle(x, j, frame)
+    _frames_block(x, 0, x.shape[1], frame)
     return frame
 
 
 @njit(cache=True, error_model="numpy", parallel=True)
 def _frames_parallel(x):
     frame = np.empty((3, 3, x.shape[1]))
-    for j in prange(x.shape[1]):
-        _frame_particle(x, j, frame)
+    for block in prange((x.shape[1] + CHUNK - 1) // CHUNK):
+        _frames_block(x, block * CHUNK, min(block * CHUNK + CHUNK, x.shape[1]), frame)
     return frame
 
 
@@ -207,28 +207,29 @@ def frames(x: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy")
-def _push_particle(moved, frame, a, driven, integrated, velocity_gain, position_gain, j):
-    """:func:`push` of particle ``j``."""
+def _push_block(moved, frame, a, driven, integrated, velocity_gain, position_gain, start, stop):
+    """:func:`push` of the particles ``start`` to ``stop``."""
     p = a.shape[0]
-    for i in range(p):
-        s = 0.0
-        for k in range(p):
-            s += frame[i, k, j] * a[k, j]
-        moved[driven[i], j] += s * velocity_gain
-        if integrated.size:
-            moved[integrated[i], j] += s * position_gain
+    for j in range(start, stop):
+        for i in range(p):
+            s = 0.0
+            for k in range(p):
+                s += frame[i, k, j] * a[k, j]
+            moved[driven[i], j] += s * velocity_gain
+            if integrated.size:
+                moved[integrated[i], j] += s * position_gain
 
 
 @njit(cache=True, error_model="numpy")
 def _push_serial(moved, frame, a, driven, integrated, velocity_gain, position_gain):
-    for j in range(a.shape[1]):
-        _push_particle(moved, frame, a, driven, integrated, velocity_gain, position_gain, j)
+    _push_block(moved, frame, a, driven, integrated, velocity_gain, position_gain, 0, a.shape[1])
 
 
 @njit(cache=True, error_model="numpy", parallel=True)
 def _push_parallel(moved, frame, a, driven, integrated, velocity_gain, position_gain):
-    for j in prange(a.shape[1]):
-        _push_particle(moved, frame, a, driven, integrated, velocity_gain, position_gain, j)
+    for block in prange((a.shape[1] + CHUNK - 1) // CHUNK):
+        _push_block(moved, frame, a, driven, integrated, velocity_gain, position_gain, block * CHUNK,
+                    min(block * CHUNK + CHUNK, a.shape[1]))
 
 
 def push(moved: np.ndarray, frame: np.ndarray, a: np.ndarray, driven: np.ndarray, integrated: np.ndarray,
