@@ -76,15 +76,18 @@ class Flattening:
     def curvature(self, x: np.ndarray) -> np.ndarray:
         """``nu(x)`` ``(N, k + k L)`` of the particles ``x`` ``(n, N)``: what each stacked measured row departs
         from its linearisation at the mean (angles wrapped)."""
-        sensor, rows, offset = self.sensor, self.rows, x.T - self.mean
-        nu = [sensor.residual(sensor.measure(x.T, self.time), self.measured[None]) - offset @ self.jacobian.T]
-        flowed, t = x.T, self.time
-        for step, (measured, jacobian) in zip(self.steps, self.ahead):
-            flowed = self.model.transition(flowed, step, t, self.input)
+        sensor, states, t = self.sensor, x.T, self.time
+        offset = states - self.mean
+        m, lags = self.measured.size, len(self.steps)
+        nu = np.empty((states.shape[0], m * (1 + lags)))  # the times side by side, each written in place
+        np.subtract(sensor.residual(sensor.measure(states, t), self.measured[None]), offset @ self.jacobian.T,
+                    out=nu[:, :m])
+        for lag, (step, (measured, jacobian)) in enumerate(zip(self.steps, self.ahead), 1):
+            states = self.model.transition(states, step, t, self.input)
             t += step
-            nu.append(sensor.residual(sensor.measure(flowed, t), measured[None]) - offset @ jacobian.T)
-        stacked = np.hstack(nu)
-        return stacked if rows.all() else stacked[:, np.tile(rows, len(nu))]
+            np.subtract(sensor.residual(sensor.measure(states, t), measured[None]), offset @ jacobian.T,
+                        out=nu[:, lag * m:(lag + 1) * m])
+        return nu if self.rows.all() else nu[:, np.tile(self.rows, 1 + lags)]
 
     def flatten(self, x: np.ndarray) -> np.ndarray | None:
         """``xi`` ``(n, N)`` of the particles ``x`` ``(n, N)``; None when every particle's curvature is below
