@@ -129,6 +129,40 @@ def test_the_parallel_orbit_loops_are_the_serial_ones_bit_for_bit(count):
         np.testing.assert_array_equal(parallel, serial)
 
 
+@pytest.mark.parametrize("count", SIZES)
+def test_the_compensated_flow_in_one_pass_is_the_three_kernels_bit_for_bit(count):
+    """``pushed_leapfrog`` (the compensated lunar transition's fast path) gives the numbers of the flow, the
+    frames and the push in turn, serial and parallel, degenerate orbits and per-particle inputs included."""
+    rng = np.random.default_rng(70 + count)
+    x = _orbits(rng, count)
+    a = np.ascontiguousarray(rng.standard_normal((3, count)) * 1e-3)
+    for u in (np.zeros((3, 1)), np.ascontiguousarray(rng.standard_normal((3, count)))):
+        for integrated in (np.arange(3), np.zeros(0, dtype=int)):
+            expected = orbit.leapfrog(x, MU_MOON, 10.0, 3, u)
+            orbit.push(expected, orbit.frames(x), a, np.arange(3, 6), integrated, 7.0, 3.0)
+            for kernel in (orbit._pushed_leapfrog_serial, orbit._pushed_leapfrog_parallel):
+                out = np.empty((9, count))
+                kernel(x, a, MU_MOON, 10.0, 3, u, np.arange(3, 6), integrated, 7.0, 3.0, out[:6])
+                np.testing.assert_array_equal(out[:6], expected)
+
+
+class _WithoutFastPath(LunarDescentModel):
+    """The lunar model as a user's framed model would be: no compensated fast path."""
+
+    def pushed_transition(self, *args):
+        return False
+
+
+@pytest.mark.parametrize("inputs", ("none", "each"))
+def test_the_compensated_fast_path_is_the_generic_transition_bit_for_bit(inputs):
+    rng = np.random.default_rng(80)
+    x = np.ascontiguousarray(np.vstack([_orbits(rng, 300), rng.standard_normal((3, 300)) * 0.1]))
+    u = None if inputs == "none" else rng.standard_normal((300, 3))
+    fast = ModelErrorCompensation(LunarDescentModel(), 1e6, 0.1).transition(x.T, 25.0, 0.0, u)
+    generic = ModelErrorCompensation(_WithoutFastPath(), 1e6, 0.1).transition(x.T, 25.0, 0.0, u)
+    np.testing.assert_array_equal(fast, generic)
+
+
 def test_compensated_lunar_transition_is_the_numpy_one():
     rng = np.random.default_rng(50)
     model = ModelErrorCompensation(LunarDescentModel(), 1e6, 0.1)

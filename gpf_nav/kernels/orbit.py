@@ -93,6 +93,59 @@ def _leapfrog_parallel(x, gm, h, steps, u):
     return out
 
 
+@njit(cache=True, error_model="numpy")
+def _pushed_leapfrog_block(x, a, gm, h, steps, u, driven, integrated, velocity_gain, position_gain, start,
+                           buffer, out):
+    """:func:`pushed_leapfrog` of the particles ``start`` to ``start + CHUNK`` through ``buffer``
+    ``(15, CHUNK)``: each one's ``F a`` (frame at its state before the step) first, then the block's flow,
+    then the pushes."""
+    size = min(buffer.shape[1], x.shape[1] - start)
+    pushed = buffer[12:15]
+    for t in range(size):
+        j = start + t
+        axes = _axes(x[0, j], x[1, j], x[2, j], x[3, j], x[4, j], x[5, j])
+        for i in range(3):  # (F a)_i = sum_k F[i, k] a_k, F[i, k] = axes[3 k + i]: the order of push's sum
+            s = 0.0
+            for k in range(3):
+                s += axes[3 * k + i] * a[k, j]
+            pushed[i, t] = s
+    _leapfrog_block(x, gm, h, steps, u, start, buffer, out)
+    for i in range(3):
+        row = driven[i]
+        for t in range(size):
+            out[row, start + t] += pushed[i, t] * velocity_gain
+        if integrated.size:
+            row = integrated[i]
+            for t in range(size):
+                out[row, start + t] += pushed[i, t] * position_gain
+
+
+@njit(cache=True, error_model="numpy")
+def _pushed_leapfrog_serial(x, a, gm, h, steps, u, driven, integrated, velocity_gain, position_gain, out):
+    buffer = np.empty((15, CHUNK))
+    for start in range(0, x.shape[1], CHUNK):
+        _pushed_leapfrog_block(x, a, gm, h, steps, u, driven, integrated, velocity_gain, position_gain, start,
+                               buffer, out)
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def _pushed_leapfrog_parallel(x, a, gm, h, steps, u, driven, integrated, velocity_gain, position_gain, out):
+    for block in prange((x.shape[1] + CHUNK - 1) // CHUNK):
+        _pushed_leapfrog_block(x, a, gm, h, steps, u, driven, integrated, velocity_gain, position_gain,
+                               block * CHUNK, np.empty((15, CHUNK)), out)
+
+
+def pushed_leapfrog(x: np.ndarray, a: np.ndarray, gm: float, h: float, steps: int, u: np.ndarray,
+                    driven: np.ndarray, integrated: np.ndarray, velocity_gain: float, position_gain: float,
+                    out: np.ndarray) -> None:
+    """:func:`leapfrog` of ``x`` ``(6, N)`` into ``out`` ``(6, N)`` (rows of any array), then the
+    acceleration ``a`` ``(3, N)``, given in the :func:`frames` at ``x``, pushed as :func:`push` pushes it:
+    the compensated lunar transition in one pass, each frame used where it is made (the same numbers as
+    the three kernels in turn; on every core from :data:`~gpf_nav.kernels.PARALLEL` particles)."""
+    kernel = _pushed_leapfrog_parallel if x.shape[1] >= PARALLEL else _pushed_leapfrog_serial
+    kernel(x, a, gm, h, steps, u, driven, integrated, velocity_gain, position_gain, out)
+
+
 def leapfrog(x: np.ndarray, gm: float, h: float, steps: int, u: np.ndarray) -> np.ndarray:
     """Kick-drift-kick leapfrog of ``steps`` sub-steps ``h`` under two-body gravity ``gm`` plus the specific
     force ``u`` ``(3, K)``, from the states ``x`` ``(6, N)`` (C-contiguous): the new states ``(6, N)`` (on
@@ -152,34 +205,42 @@ def leapfrog_jacobian(x: np.ndarray, gm: float, h: float, steps: int, u: np.ndar
     return out
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _axes(r0, r1, r2, v0, v1, v2):
+    """The radial, along-track and cross-track axes of the osculating orbit of ``(r, v)``, nine floats
+    (:func:`frames`)."""
+    size_r = max(math.sqrt(r0 * r0 + r1 * r1 + r2 * r2), MIN_RANGE)
+    a0, a1, a2 = r0 / size_r, r1 / size_r, r2 / size_r
+    n0, n1, n2 = a1 * v2 - a2 * v1, a2 * v0 - a0 * v2, a0 * v1 - a1 * v0
+    size = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    if size > 1e-12 * max(math.sqrt(v0 * v0 + v1 * v1 + v2 * v2), 1.0):
+        n0, n1, n2 = n0 / size, n1 / size, n2 / size
+        along = a0 * v0 + a1 * v1 + a2 * v2
+        t0, t1, t2 = (v0 - a0 * along) / size, (v1 - a1 * along) / size, (v2 - a2 * along) / size
+    else:  # no orbit plane: any axis normal to r, with the least-aligned base axis
+        m0, m1, m2 = abs(a0), abs(a1), abs(a2)
+        b = 0 if (m0 <= m1 and m0 <= m2) else (1 if m1 <= m2 else 2)
+        e0, e1, e2 = (1.0 if b == 0 else 0.0), (1.0 if b == 1 else 0.0), (1.0 if b == 2 else 0.0)
+        n0, n1, n2 = a1 * e2 - a2 * e1, a2 * e0 - a0 * e2, a0 * e1 - a1 * e0
+        size = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        n0, n1, n2 = n0 / size, n1 / size, n2 / size
+        t0, t1, t2 = n1 * a2 - n2 * a1, n2 * a0 - n0 * a2, n0 * a1 - n1 * a0
+    finite = True
+    for value in (a0, a1, a2, t0, t1, t2, n0, n1, n2):
+        finite = finite and math.isfinite(value)
+    if not finite:
+        return 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+    return a0, a1, a2, t0, t1, t2, n0, n1, n2
+
+
 @njit(cache=True, error_model="numpy")
 def _frames_block(x, start, stop, frame):
     """:func:`frames` of the particles ``start`` to ``stop`` of ``x`` into ``frame``."""
     for j in range(start, stop):
-        r0, r1, r2, v0, v1, v2 = x[0, j], x[1, j], x[2, j], x[3, j], x[4, j], x[5, j]
-        size_r = max(math.sqrt(r0 * r0 + r1 * r1 + r2 * r2), MIN_RANGE)
-        a0, a1, a2 = r0 / size_r, r1 / size_r, r2 / size_r
-        n0, n1, n2 = a1 * v2 - a2 * v1, a2 * v0 - a0 * v2, a0 * v1 - a1 * v0
-        size = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
-        if size > 1e-12 * max(math.sqrt(v0 * v0 + v1 * v1 + v2 * v2), 1.0):
-            n0, n1, n2 = n0 / size, n1 / size, n2 / size
-            along = a0 * v0 + a1 * v1 + a2 * v2
-            t0, t1, t2 = (v0 - a0 * along) / size, (v1 - a1 * along) / size, (v2 - a2 * along) / size
-        else:  # no orbit plane: any axis normal to r, with the least-aligned base axis
-            m0, m1, m2 = abs(a0), abs(a1), abs(a2)
-            b = 0 if (m0 <= m1 and m0 <= m2) else (1 if m1 <= m2 else 2)
-            e0, e1, e2 = (1.0 if b == 0 else 0.0), (1.0 if b == 1 else 0.0), (1.0 if b == 2 else 0.0)
-            n0, n1, n2 = a1 * e2 - a2 * e1, a2 * e0 - a0 * e2, a0 * e1 - a1 * e0
-            size = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
-            n0, n1, n2 = n0 / size, n1 / size, n2 / size
-            t0, t1, t2 = n1 * a2 - n2 * a1, n2 * a0 - n0 * a2, n0 * a1 - n1 * a0
-        axes = (a0, a1, a2, t0, t1, t2, n0, n1, n2)
-        finite = True
-        for value in axes:
-            finite = finite and math.isfinite(value)
+        axes = _axes(x[0, j], x[1, j], x[2, j], x[3, j], x[4, j], x[5, j])
         for c in range(3):
             for axis in range(3):
-                frame[c, axis, j] = axes[3 * axis + c] if finite else (1.0 if c == axis else 0.0)
+                frame[c, axis, j] = axes[3 * axis + c]
 
 
 @njit(cache=True, error_model="numpy")

@@ -135,18 +135,22 @@ class ModelErrorCompensation(StateSpaceModel):
         a = xt[self._n:]  # (p, N)
         out = np.empty((self.state_dim, x.shape[0]))
         moved = out[:self._n]
-        moved[...] = self.base.transition(xt[:self._n].T, dt, t, u).T
-        frame = self._frame(xt[:self._n])
         # G has one velocity (and one position) entry per column: add them without a matrix product
         velocity_gain = G[self.acceleration_of[0], 0]
         position_gain = 0.0 if self._integrated_into is None else G[self._integrated_into[0], 0]
-        if frame is None:
-            moved[self._driven] += a * velocity_gain
-            if self._integrated_into is not None:
-                moved[self._integrated] += a * position_gain
-        else:  # turned to the state's own axes by each particle's frame
-            orbit.push(moved, np.ascontiguousarray(frame), np.ascontiguousarray(a), self.acceleration_of,
-                       self._integrated_rows, velocity_gain, position_gain)
+        fused = self._framed and self.base.pushed_transition(xt[:self._n], dt, t, u, a, velocity_gain,
+                                                             position_gain, self.acceleration_of,
+                                                             self._integrated_rows, moved)
+        if not fused:
+            moved[...] = self.base.transition(xt[:self._n].T, dt, t, u).T
+            frame = self._frame(xt[:self._n])
+            if frame is None:
+                moved[self._driven] += a * velocity_gain
+                if self._integrated_into is not None:
+                    moved[self._integrated] += a * position_gain
+            else:  # turned to the state's own axes by each particle's frame
+                orbit.push(moved, np.ascontiguousarray(frame), np.ascontiguousarray(a), self.acceleration_of,
+                           self._integrated_rows, velocity_gain, position_gain)
         np.multiply(a, decay, out=out[self._n:])
         return out.T
 

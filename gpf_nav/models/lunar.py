@@ -90,6 +90,15 @@ class LunarDescentModel(StateSpaceModel):
         steps = self._substeps(dt)
         return orbit.leapfrog(_particle_last(x), self.gm, dt / steps, steps, _input_columns(u)).T
 
+    def pushed_transition(self, x, dt, t, u, a, velocity_gain, position_gain, driven, integrated, out):
+        """The compensated transition's flow and push in one pass (:func:`gpf_nav.kernels.orbit.pushed_leapfrog`;
+        the numbers of :meth:`transition` and :meth:`compensation_frame` in turn)."""
+        steps = self._substeps(dt)
+        orbit.pushed_leapfrog(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(a, dtype=float),
+                              self.gm, dt / steps, steps, _input_columns(u), driven, integrated, velocity_gain,
+                              position_gain, out)
+        return True
+
     def transition_jacobian(self, x, dt, t=0.0, u=None):
         """Second-order Taylor ``I + A h + (A h)^2 / 2`` chained over the sub-steps of :meth:`transition`
         (:func:`gpf_nav.kernels.orbit.leapfrog_jacobian`)."""

@@ -152,6 +152,16 @@ class StateSpaceModel(ABC):
         compensation need not re-learn a force each time the frame turns."""
         return None
 
+    def pushed_transition(self, x: np.ndarray, dt: float, t: float, u, a: np.ndarray, velocity_gain: float,
+                          position_gain: float, driven: np.ndarray, integrated: np.ndarray, out: np.ndarray) -> bool:
+        """Optional fast path of the compensated transition (:mod:`gpf_nav.models.compensation`): write into
+        ``out`` ``(n, N)`` the transition of the particle-last states ``x`` ``(n, N)`` plus the acceleration
+        ``a`` ``(p, N)``, given in :meth:`compensation_frame` at ``x``, times ``velocity_gain`` on the rows
+        ``driven`` ``(p,)`` and times ``position_gain`` on the rows ``integrated`` (empty: none), and return
+        True. False (the default): the compensation does it from :meth:`transition` and
+        :meth:`compensation_frame`, with the same numbers."""
+        return False
+
     def measure_and_jacobian(self, x: np.ndarray, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """``(h(x, t) (N, m), H(x, t) (N, m, n))`` together; override to share work between the two."""
         return self.measure(x, t), self.measurement_jacobian(x, t)
