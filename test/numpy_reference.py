@@ -201,3 +201,22 @@ def positive_definite(cov):
     floored = (vecs * np.maximum(vals, floor)) @ vecs.T
     floored = 0.5 * (floored + floored.T) * np.outer(scale, scale)
     return floored
+
+
+def wrapped_residual(y, y_pred, angular):
+    """``y - y_pred`` with the components of the mask ``angular`` wrapped to (-pi, pi] (at 225425b)."""
+    r = np.asarray(y, dtype=float) - y_pred
+    angles = np.flatnonzero(angular)
+    if angles.size:
+        turns = np.ceil((r[..., angles] - np.pi) * (1.0 / (2.0 * np.pi)))
+        if np.count_nonzero(turns):
+            r[..., angles] -= 2.0 * np.pi * turns
+    return r
+
+
+def line_of_sight(x, station):
+    """Line of sight ``(3, N)``, horizontal length and range ``(N,)`` of the states ``x`` ``(N, 6)`` (at
+    225425b)."""
+    d = x.T[:3] - station[:, None]
+    h2 = d[0] * d[0] + d[1] * d[1]
+    return d, np.sqrt(h2), np.sqrt(h2 + d[2] * d[2])

@@ -19,6 +19,7 @@ from gpf_nav.kernels import cloud, covariance, information, orbit
 from gpf_nav.kernels.systematic import systematic_ancestors
 from gpf_nav.models.compensation import ModelErrorCompensation
 from gpf_nav.models.lunar import MU_MOON, LunarDescentModel
+from gpf_nav.models.state_space import wrapped_residual
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 
 RTOL = 1e-12
@@ -144,6 +145,32 @@ def test_the_compensated_flow_in_one_pass_is_the_three_kernels_bit_for_bit(count
                 out = np.empty((9, count))
                 kernel(x, a, MU_MOON, 10.0, 3, u, np.arange(3, 6), integrated, 7.0, 3.0, out[:6])
                 np.testing.assert_array_equal(out[:6], expected)
+
+
+@pytest.mark.parametrize("count", SIZES)
+def test_the_residual_and_the_line_of_sight_are_the_numpy_ones_bit_for_bit(count):
+    """Wrapped or not (a wrap anywhere subtracts ``2 pi * turns`` from every angle, signed zeros
+    included), non-finite residuals, broadcast and stacked shapes; the lunar line of sight."""
+    rng = np.random.default_rng(90 + count)
+    with np.errstate(invalid="ignore"):
+        for mask in ([False, True, True], [True, False, True], [False, False], [True]):
+            mask = np.array(mask)
+            for scale in (0.5, 4.0):
+                y = rng.standard_normal((count, mask.size)) * scale
+                h = rng.standard_normal((count, mask.size)) * 0.5
+                y[0, -1], h[0, -1] = -0.0, 0.0
+                if count >= 7:
+                    y[1, 0], y[2, -1] = np.nan, np.inf
+                for a, b in ((y, h), (np.asfortranarray(y), h[:1]), (y[0], h), (np.stack([y, y]), h[0])):
+                    got = wrapped_residual(a, b, mask)
+                    expected = reference.wrapped_residual(a, b, mask)
+                    assert got.shape == expected.shape
+                    np.testing.assert_array_equal(got.view(np.int64), expected.view(np.int64))
+    model = LunarDescentModel(station=(1.7e6, 1e3, 2e3))
+    x = _orbits(rng, count).T
+    for states in (x, np.ascontiguousarray(x)):
+        for got, expected in zip(model._line_of_sight(states), reference.line_of_sight(states, model.station)):
+            np.testing.assert_array_equal(got, expected)
 
 
 class _WithoutFastPath(LunarDescentModel):

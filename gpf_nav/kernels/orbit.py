@@ -301,3 +301,19 @@ def push(moved: np.ndarray, frame: np.ndarray, a: np.ndarray, driven: np.ndarray
     :data:`~gpf_nav.kernels.PARALLEL` particles)."""
     kernel = _push_parallel if a.shape[1] >= PARALLEL else _push_serial
     kernel(moved, frame, a, driven, integrated, velocity_gain, position_gain)
+
+
+@njit(cache=True, error_model="numpy")
+def line_of_sight(r: np.ndarray, station: np.ndarray) -> np.ndarray:
+    """``(5, N)``: the line of sight ``d = r - station`` (rows 0 to 2), its horizontal length and its
+    length (the range) of the positions ``r`` ``(3, N)`` (C-contiguous) from ``station`` ``(3,)``, in the
+    numpy code's order of operations."""
+    out = np.empty((5, r.shape[1]))
+    s0, s1, s2 = station[0], station[1], station[2]
+    for j in range(r.shape[1]):
+        d0, d1, d2 = r[0, j] - s0, r[1, j] - s1, r[2, j] - s2
+        horizontal = d0 * d0 + d1 * d1
+        out[0, j], out[1, j], out[2, j] = d0, d1, d2
+        out[3, j] = math.sqrt(horizontal)
+        out[4, j] = math.sqrt(horizontal + d2 * d2)
+    return out

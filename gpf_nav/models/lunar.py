@@ -132,10 +132,8 @@ class LunarDescentModel(StateSpaceModel):
     # --- measurements -------------------------------------------------------------------------------
     def _line_of_sight(self, x):
         """Line of sight ``d`` ``(3, N)`` from the station, its horizontal length and its range ``(N,)``."""
-        d = x.T[:3] - self.station[:, None]
-        h2 = d[0] * d[0] + d[1] * d[1]
-        rho2 = h2 + d[2] * d[2]
-        return d, np.sqrt(h2), np.sqrt(rho2)
+        geometry = orbit.line_of_sight(np.ascontiguousarray(x.T[:3], dtype=float), self.station)
+        return geometry[:3], geometry[3], geometry[4]
 
     def _measure(self, d, horizontal, rho):
         out = np.empty((3, rho.size))  # (filled row by row: np.stack costs more than the arithmetic at N = 500)

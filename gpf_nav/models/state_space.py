@@ -23,6 +23,7 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
+from gpf_nav.kernels.angles import wrap_columns
 
 _TWO_PI = 2.0 * np.pi
 
@@ -33,16 +34,11 @@ def wrap_angle(a: np.ndarray) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=16)
-def _angle_columns(angular: bytes) -> slice | np.ndarray | None:
-    """The angular components of the mask ``angular`` (its bytes: cached, the residual runs at every
-    step) as a slice when they are consecutive (one wrap, no gather), else their indices; None when
-    there are none."""
+def _angle_columns(angular: bytes) -> np.ndarray | None:
+    """The indices of the angular components of the mask ``angular`` (its bytes: cached, the residual
+    runs at every step); None when there are none."""
     index = np.flatnonzero(np.frombuffer(angular, dtype=bool))
-    if index.size == 0:
-        return None
-    if index[-1] - index[0] + 1 == index.size:
-        return slice(int(index[0]), int(index[-1]) + 1)
-    return index
+    return index if index.size else None
 
 
 _TIME_OPTIONAL = ("process_noise", "measure", "measurement_jacobian", "measure_and_jacobian")
@@ -187,11 +183,10 @@ def wrapped_residual(y: np.ndarray, y_pred: np.ndarray, angular: np.ndarray) -> 
     (-pi, pi]: the residual of models and sensors (:mod:`gpf_nav.sensors`)."""
     r = np.asarray(y, dtype=float) - y_pred
     angles = _angle_columns(np.asarray(angular, dtype=bool).tobytes())
-    if angles is not None:
-        # wrap_angle, skipping its subtraction when no component needs it (the usual case)
-        turns = np.ceil((r[..., angles] - np.pi) * (1.0 / _TWO_PI))
-        if np.count_nonzero(turns):
-            r[..., angles] -= _TWO_PI * turns
+    if angles is not None:  # in place, through a two-dimensional view of the new array
+        if r.ndim > 2:
+            r = np.ascontiguousarray(r)  # (its reshape is then a view)
+        wrap_columns(r.reshape(-1, r.shape[-1]), angles)
     return r
 
 
