@@ -16,6 +16,7 @@ from gpf_nav.filters import BootstrapPF, GeometricProjectionPF, MultipleModelGPF
 from gpf_nav.filters.kernel import match_moments
 from gpf_nav.linalg import positive_definite
 from gpf_nav.kernels import cloud, covariance, information, orbit
+from gpf_nav.kernels.flattening import largest_scaled
 from gpf_nav.kernels.systematic import systematic_ancestors
 from gpf_nav.models.compensation import ModelErrorCompensation
 from gpf_nav.models.lunar import MU_MOON, LunarDescentModel
@@ -171,6 +172,18 @@ def test_the_residual_and_the_line_of_sight_are_the_numpy_ones_bit_for_bit(count
     for states in (x, np.ascontiguousarray(x)):
         for got, expected in zip(model._line_of_sight(states), reference.line_of_sight(states, model.station)):
             np.testing.assert_array_equal(got, expected)
+
+
+@pytest.mark.parametrize("count", SIZES)
+def test_the_flattening_size_tests_are_the_numpy_ones(count):
+    rng = np.random.default_rng(100 + count)
+    nu, previous = rng.standard_normal((2, count, 9)) * rng.uniform(0.1, 10.0, 9)
+    scale = rng.uniform(0.1, 2.0, 9)
+    assert largest_scaled(nu, np.zeros((0, 0)), scale) == np.abs(nu / scale).max()
+    assert largest_scaled(nu, previous, scale) == np.abs((nu - previous) / scale).max()
+    nu[-1, 4] = np.nan
+    assert np.isnan(largest_scaled(nu, np.zeros((0, 0)), scale))
+    assert np.isnan(largest_scaled(nu, previous, scale))
 
 
 class _WithoutFastPath(LunarDescentModel):

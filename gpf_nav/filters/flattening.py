@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gpf_nav.kernels.flattening import largest_scaled
 from gpf_nav.models.state_space import StateSpaceModel
 from gpf_nav.sensors.sensor import Sensor
 
@@ -41,6 +42,8 @@ NEGLIGIBLE = 1e-3
 coordinates (:meth:`Flattening.flatten`), and changes of it below which the map back has converged."""
 RANK_TOLERANCE = 1e-8
 """Singular values of the noise-whitened rows ahead below this fraction of the largest are dropped."""
+_NONE = np.zeros((0, 0))
+"""No previous curvature (:func:`~gpf_nav.kernels.flattening.largest_scaled`)."""
 
 
 @dataclass(frozen=True)
@@ -93,7 +96,7 @@ class Flattening:
         """``xi`` ``(n, N)`` of the particles ``x`` ``(n, N)``; None when every particle's curvature is below
         :data:`NEGLIGIBLE` (the coordinates are then the state's own, to that accuracy)."""
         nu = self.curvature(x)
-        if not np.abs(nu / self.noise_std).max() >= NEGLIGIBLE:  # (NaN: nothing to flatten with)
+        if not largest_scaled(nu, _NONE, self.noise_std) >= NEGLIGIBLE:  # (NaN: nothing to flatten with)
             return None
         return x + self.gain @ nu.T
 
@@ -106,7 +109,7 @@ class Flattening:
         for _ in range(ITERATIONS - 1):
             previous, nu = nu, self.curvature(x)
             x = xi - self.gain @ nu.T
-            if not np.abs((nu - previous) / self.noise_std).max() >= NEGLIGIBLE:
+            if not largest_scaled(nu, previous, self.noise_std) >= NEGLIGIBLE:
                 break
         return x
 
