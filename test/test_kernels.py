@@ -16,7 +16,8 @@ from gpf_nav.filters import BootstrapPF, GeometricProjectionPF, MultipleModelGPF
 from gpf_nav.filters.kernel import match_moments
 from gpf_nav.linalg import positive_definite
 from gpf_nav.kernels import cloud, covariance, information, orbit
-from gpf_nav.kernels.flattening import largest_scaled
+from gpf_nav.kernels import flattening as fl_kernels
+from gpf_nav.kernels.flattening import departure, largest_scaled
 from gpf_nav.kernels.systematic import systematic_ancestors
 from gpf_nav.models.compensation import ModelErrorCompensation
 from gpf_nav.models.lunar import MU_MOON, LunarDescentModel
@@ -184,6 +185,28 @@ def test_the_flattening_size_tests_are_the_numpy_ones(count):
     nu[-1, 4] = np.nan
     assert np.isnan(largest_scaled(nu, np.zeros((0, 0)), scale))
     assert np.isnan(largest_scaled(nu, previous, scale))
+
+
+@pytest.mark.parametrize("count", SIZES)
+def test_the_flattening_departures_are_the_numpy_ones(count):
+    """Residual minus its linear part at the mean, into columns of a wider array; serial and parallel
+    loops alike bit for bit (equal to the BLAS product to rounding, and bit for bit where that product is
+    a chain of fused multiply-adds)."""
+    rng = np.random.default_rng(110 + count)
+    x, _ = _cloud(rng, 9, count)
+    mean, jacobian = x.mean(axis=1), rng.standard_normal((3, 9))
+    for residual in (rng.standard_normal((count, 3)), np.asfortranarray(rng.standard_normal((count, 3)))):
+        expected = residual - (x.T - mean) @ jacobian.T
+        for kernel in (departure, fl_kernels._departure_parallel):
+            out = np.full((count, 9), np.nan)
+            kernel(residual, x, mean, jacobian, out, 3)
+            _close(out[:, 3:6], expected, atol=1e-12 * np.abs((x.T - mean) @ np.abs(jacobian).T).max())
+            assert np.isnan(out[:, :3]).all() and np.isnan(out[:, 6:]).all()
+        serial = np.empty((count, 3))
+        fl_kernels._departure_serial(residual, x, mean, jacobian, serial, 0)
+        parallel = np.empty((count, 3))
+        fl_kernels._departure_parallel(residual, x, mean, jacobian, parallel, 0)
+        np.testing.assert_array_equal(parallel, serial)
 
 
 class _WithoutFastPath(LunarDescentModel):

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gpf_nav.kernels.flattening import largest_scaled
+from gpf_nav.kernels.flattening import departure, largest_scaled
 from gpf_nav.models.state_space import StateSpaceModel
 from gpf_nav.sensors.sensor import Sensor
 
@@ -80,16 +80,16 @@ class Flattening:
         """``nu(x)`` ``(N, k + k L)`` of the particles ``x`` ``(n, N)``: what each stacked measured row departs
         from its linearisation at the mean (angles wrapped)."""
         sensor, states, t = self.sensor, x.T, self.time
-        offset = states - self.mean
+        x = np.ascontiguousarray(x)
         m, lags = self.measured.size, len(self.steps)
-        nu = np.empty((states.shape[0], m * (1 + lags)))  # the times side by side, each written in place
-        np.subtract(sensor.residual(sensor.measure(states, t), self.measured[None]), offset @ self.jacobian.T,
-                    out=nu[:, :m])
+        nu = np.empty((x.shape[1], m * (1 + lags)))  # the times side by side, each written in place
+        departure(sensor.residual(sensor.measure(states, t), self.measured[None]), x, self.mean,
+                  np.ascontiguousarray(self.jacobian), nu, 0)
         for lag, (step, (measured, jacobian)) in enumerate(zip(self.steps, self.ahead), 1):
             states = self.model.transition(states, step, t, self.input)
             t += step
-            np.subtract(sensor.residual(sensor.measure(states, t), measured[None]), offset @ jacobian.T,
-                        out=nu[:, lag * m:(lag + 1) * m])
+            departure(sensor.residual(sensor.measure(states, t), measured[None]), x, self.mean,
+                      np.ascontiguousarray(jacobian), nu, lag * m)
         return nu if self.rows.all() else nu[:, np.tile(self.rows, 1 + lags)]
 
     def flatten(self, x: np.ndarray) -> np.ndarray | None:

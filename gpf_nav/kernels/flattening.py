@@ -1,11 +1,57 @@
-"""The flattened update's tests of size (:mod:`gpf_nav.filters.flattening`): the largest departure from
-the linearisation, or change of it, in noise standard deviations, in one pass without temporaries."""
+"""The flattened update's inner loops (:mod:`gpf_nav.filters.flattening`): the departures of the
+measured rows from their linearisation at the cloud's mean, and the tests of their size, in noise
+standard deviations, each in one pass without temporaries."""
 from __future__ import annotations
 
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
+
+from gpf_nav.kernels import CHUNK, PARALLEL
+
+
+@njit(cache=True, error_model="numpy", fastmath={"contract"})
+def _departure_block(residual, x, mean, jacobian, out, column, start, linear):
+    """:func:`departure` of the particles ``start`` to ``start + CHUNK``, row by row over the block, the
+    linear part summed over the state's components in turn through ``linear`` ``(CHUNK,)`` (a loop
+    that vectorises; indexing views, not ``start + t``, lets it)."""
+    size = min(linear.size, x.shape[1] - start)
+    for c in range(jacobian.shape[0]):
+        for t in range(size):
+            linear[t] = 0.0
+        for a in range(x.shape[0]):
+            slope, centre, row = jacobian[c, a], mean[a], x[a, start:start + size]
+            for t in range(size):
+                linear[t] += (row[t] - centre) * slope
+        departures, residuals = out[start:start + size, column + c], residual[start:start + size, c]
+        for t in range(size):
+            departures[t] = residuals[t] - linear[t]
+
+
+@njit(cache=True, error_model="numpy")
+def _departure_serial(residual, x, mean, jacobian, out, column):
+    linear = np.empty(CHUNK)
+    for start in range(0, x.shape[1], CHUNK):
+        _departure_block(residual, x, mean, jacobian, out, column, start, linear)
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def _departure_parallel(residual, x, mean, jacobian, out, column):
+    for block in prange((x.shape[1] + CHUNK - 1) // CHUNK):
+        _departure_block(residual, x, mean, jacobian, out, column, block * CHUNK, np.empty(CHUNK))
+
+
+def departure(residual: np.ndarray, x: np.ndarray, mean: np.ndarray, jacobian: np.ndarray, out: np.ndarray,
+              column: int) -> None:
+    """Write into the columns ``column`` to ``column + m`` of ``out`` ``(N, K)`` the ``residual`` ``(N, m)``
+    of the particles ``x`` ``(n, N)`` (C-contiguous) minus its linear part ``(x - mean) @ jacobian.T``
+    (``mean`` ``(n,)``, ``jacobian`` ``(m, n)`` C-contiguous). Each linear part is a chain of fused
+    multiply-adds over the components in turn, the order of the BLAS product it replaces (equal to it bit
+    for bit where that product is such a chain, as with OpenBLAS on x86-64 with FMA; to rounding
+    elsewhere). On every core from :data:`~gpf_nav.kernels.PARALLEL` particles."""
+    kernel = _departure_parallel if x.shape[1] >= PARALLEL else _departure_serial
+    kernel(residual, x, mean, jacobian, out, column)
 
 
 @njit(cache=True, error_model="numpy")
