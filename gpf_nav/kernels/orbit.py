@@ -93,46 +93,83 @@ def _leapfrog_parallel(x, gm, h, steps, u):
     return out
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _frame_times(a0, a1, a2, t0, t1, t2, n0, n1, n2, c0, c1, c2):
+    """``F c`` for the frame of axes ``a``, ``t``, ``n`` (columns), each component summed as :func:`push`
+    sums it (from 0, over the axes in turn)."""
+    return (((0.0 + a0 * c0) + t0 * c1) + n0 * c2, ((0.0 + a1 * c0) + t1 * c1) + n1 * c2,
+            ((0.0 + a2 * c0) + t2 * c1) + n2 * c2)
+
+
+@njit(cache=True, error_model="numpy")
+def _frames_times(x, a, start, stop, pushed):
+    """``F a`` of the particles ``start`` to ``stop`` (frame at ``x``) into ``pushed`` ``(4, CHUNK)``: a loop
+    that vectorises, flagging in ``pushed[3]`` where there is no orbit plane or an axis is not finite (for
+    :func:`_frames_times_again`); returns how many it flagged."""
+    r0, r1, r2, v0, v1, v2 = x[0, start:stop], x[1, start:stop], x[2, start:stop], x[3, start:stop], \
+        x[4, start:stop], x[5, start:stop]
+    c0, c1, c2 = a[0, start:stop], a[1, start:stop], a[2, start:stop]
+    flagged = 0
+    for t in range(stop - start):
+        planar, e0, e1, e2, t0, t1, t2, n0, n1, n2 = _planar_axes(r0[t], r1[t], r2[t], v0[t], v1[t], v2[t])
+        pushed[0, t], pushed[1, t], pushed[2, t] = _frame_times(e0, e1, e2, t0, t1, t2, n0, n1, n2, c0[t], c1[t],
+                                                                c2[t])
+        flag = 0 if planar & _finite(e0, e1, e2, t0, t1, t2, n0, n1, n2) else 1
+        pushed[3, t] = flag
+        flagged += flag  # (an integer sum: a sum of floats would keep the loop from vectorising)
+    return flagged
+
+
+@njit(cache=True, error_model="numpy")
+def _frames_times_again(x, a, start, stop, pushed):
+    """:func:`_frames_times` with :func:`_axes` where it flagged the particle."""
+    for t in range(stop - start):
+        if pushed[3, t] != 0.0:
+            j = start + t
+            e0, e1, e2, t0, t1, t2, n0, n1, n2 = _axes(x[0, j], x[1, j], x[2, j], x[3, j], x[4, j], x[5, j])
+            pushed[0, t], pushed[1, t], pushed[2, t] = _frame_times(e0, e1, e2, t0, t1, t2, n0, n1, n2, a[0, j],
+                                                                    a[1, j], a[2, j])
+
+
 @njit(cache=True, error_model="numpy")
 def _pushed_leapfrog_block(x, a, gm, h, steps, u, driven, integrated, velocity_gain, position_gain, start,
-                           buffer, out):
+                           buffer, pushed, out):
     """:func:`pushed_leapfrog` of the particles ``start`` to ``start + CHUNK`` through ``buffer``
-    ``(15, CHUNK)``: each one's ``F a`` (frame at its state before the step) first, then the block's flow,
-    then the pushes."""
+    ``(12, CHUNK)`` and ``pushed`` ``(4, CHUNK)``: each one's ``F a`` (frame at its state before the step,
+    :func:`_frames_times`), then the block's flow, then the pushes. Each loop over the block is a function
+    of its own: inlined together, the frames' loop did not vectorise."""
     size = min(buffer.shape[1], x.shape[1] - start)
-    pushed = buffer[12:15]
-    for t in range(size):
-        j = start + t
-        axes = _axes(x[0, j], x[1, j], x[2, j], x[3, j], x[4, j], x[5, j])
-        for i in range(3):  # (F a)_i = sum_k F[i, k] a_k, F[i, k] = axes[3 k + i]: the order of push's sum
-            s = 0.0
-            for k in range(3):
-                s += axes[3 * k + i] * a[k, j]
-            pushed[i, t] = s
+    stop = start + size
+    if _frames_times(x, a, start, stop, pushed):  # (a scan of the flags costs as much as the frames: its
+        # vectorised loop computes _axes for every particle)
+        _frames_times_again(x, a, start, stop, pushed)
     _leapfrog_block(x, gm, h, steps, u, start, buffer, out)
     for i in range(3):
-        row = driven[i]
-        for t in range(size):
-            out[row, start + t] += pushed[i, t] * velocity_gain
+        _add_times(out[driven[i], start:stop], pushed[i, :size], velocity_gain)
         if integrated.size:
-            row = integrated[i]
-            for t in range(size):
-                out[row, start + t] += pushed[i, t] * position_gain
+            _add_times(out[integrated[i], start:stop], pushed[i, :size], position_gain)
+
+
+@njit(cache=True, error_model="numpy")
+def _add_times(moved, pushed, gain):
+    """``moved += pushed * gain`` (rows ``(K,)``)."""
+    for t in range(moved.size):
+        moved[t] += pushed[t] * gain
 
 
 @njit(cache=True, error_model="numpy")
 def _pushed_leapfrog_serial(x, a, gm, h, steps, u, driven, integrated, velocity_gain, position_gain, out):
-    buffer = np.empty((15, CHUNK))
+    buffer, pushed = np.empty((12, CHUNK)), np.empty((4, CHUNK))
     for start in range(0, x.shape[1], CHUNK):
         _pushed_leapfrog_block(x, a, gm, h, steps, u, driven, integrated, velocity_gain, position_gain, start,
-                               buffer, out)
+                               buffer, pushed, out)
 
 
 @njit(cache=True, error_model="numpy", parallel=True)
 def _pushed_leapfrog_parallel(x, a, gm, h, steps, u, driven, integrated, velocity_gain, position_gain, out):
     for block in prange((x.shape[1] + CHUNK - 1) // CHUNK):
         _pushed_leapfrog_block(x, a, gm, h, steps, u, driven, integrated, velocity_gain, position_gain,
-                               block * CHUNK, np.empty((15, CHUNK)), out)
+                               block * CHUNK, np.empty((12, CHUNK)), np.empty((4, CHUNK)), out)
 
 
 def pushed_leapfrog(x: np.ndarray, a: np.ndarray, gm: float, h: float, steps: int, u: np.ndarray,
@@ -206,18 +243,33 @@ def leapfrog_jacobian(x: np.ndarray, gm: float, h: float, steps: int, u: np.ndar
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _axes(r0, r1, r2, v0, v1, v2):
-    """The radial, along-track and cross-track axes of the osculating orbit of ``(r, v)``, nine floats
-    (:func:`frames`)."""
+def _finite(a0, a1, a2, t0, t1, t2, n0, n1, n2):
+    return (math.isfinite(a0) & math.isfinite(a1) & math.isfinite(a2) & math.isfinite(t0) & math.isfinite(t1)
+            & math.isfinite(t2) & math.isfinite(n0) & math.isfinite(n1) & math.isfinite(n2))
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _planar_axes(r0, r1, r2, v0, v1, v2):
+    """``(planar, nine floats)``: whether ``(r, v)`` spans an orbit plane, and the radial, along-track and
+    cross-track axes of the osculating orbit (its radial axis whether or not; the other two only when
+    planar)."""
     size_r = max(math.sqrt(r0 * r0 + r1 * r1 + r2 * r2), MIN_RANGE)
     a0, a1, a2 = r0 / size_r, r1 / size_r, r2 / size_r
     n0, n1, n2 = a1 * v2 - a2 * v1, a2 * v0 - a0 * v2, a0 * v1 - a1 * v0
     size = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
-    if size > 1e-12 * max(math.sqrt(v0 * v0 + v1 * v1 + v2 * v2), 1.0):
-        n0, n1, n2 = n0 / size, n1 / size, n2 / size
-        along = a0 * v0 + a1 * v1 + a2 * v2
-        t0, t1, t2 = (v0 - a0 * along) / size, (v1 - a1 * along) / size, (v2 - a2 * along) / size
-    else:  # no orbit plane: any axis normal to r, with the least-aligned base axis
+    planar = size > 1e-12 * max(math.sqrt(v0 * v0 + v1 * v1 + v2 * v2), 1.0)
+    n0, n1, n2 = n0 / size, n1 / size, n2 / size
+    along = a0 * v0 + a1 * v1 + a2 * v2
+    t0, t1, t2 = (v0 - a0 * along) / size, (v1 - a1 * along) / size, (v2 - a2 * along) / size
+    return planar, a0, a1, a2, t0, t1, t2, n0, n1, n2
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _axes(r0, r1, r2, v0, v1, v2):
+    """The radial, along-track and cross-track axes of the osculating orbit of ``(r, v)``, nine floats
+    (:func:`frames`)."""
+    planar, a0, a1, a2, t0, t1, t2, n0, n1, n2 = _planar_axes(r0, r1, r2, v0, v1, v2)
+    if not planar:  # no orbit plane: any axis normal to r, with the least-aligned base axis
         m0, m1, m2 = abs(a0), abs(a1), abs(a2)
         b = 0 if (m0 <= m1 and m0 <= m2) else (1 if m1 <= m2 else 2)
         e0, e1, e2 = (1.0 if b == 0 else 0.0), (1.0 if b == 1 else 0.0), (1.0 if b == 2 else 0.0)
@@ -225,10 +277,7 @@ def _axes(r0, r1, r2, v0, v1, v2):
         size = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
         n0, n1, n2 = n0 / size, n1 / size, n2 / size
         t0, t1, t2 = n1 * a2 - n2 * a1, n2 * a0 - n0 * a2, n0 * a1 - n1 * a0
-    finite = True
-    for value in (a0, a1, a2, t0, t1, t2, n0, n1, n2):
-        finite = finite and math.isfinite(value)
-    if not finite:
+    if not _finite(a0, a1, a2, t0, t1, t2, n0, n1, n2):
         return 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
     return a0, a1, a2, t0, t1, t2, n0, n1, n2
 
