@@ -16,11 +16,13 @@ def wrap_columns(r: np.ndarray, columns: np.ndarray) -> None:
     ``t = ceil((r - pi) / (2 pi))``, every one of them when any ``t`` is not zero (the numpy code's
     arithmetic, signed zeros included), none otherwise."""
     wrap = False
-    for i in range(r.shape[0]):
-        for c in columns:
-            wrap = wrap or np.ceil((r[i, c] - math.pi) * INVERSE_TWO_PI) != 0.0
+    for c in columns:  # (column by column, without a short-circuit: the loops vectorise)
+        column = r[:, c]
+        for i in range(column.size):
+            wrap |= np.ceil((column[i] - math.pi) * INVERSE_TWO_PI) != 0.0
     if not wrap:
         return
-    for i in range(r.shape[0]):
-        for c in columns:
-            r[i, c] -= TWO_PI * np.ceil((r[i, c] - math.pi) * INVERSE_TWO_PI)
+    for c in columns:
+        column = r[:, c]
+        for i in range(column.size):
+            column[i] -= TWO_PI * np.ceil((column[i] - math.pi) * INVERSE_TWO_PI)
