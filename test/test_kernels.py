@@ -16,8 +16,8 @@ from gpf_nav.filters import BootstrapPF, GeometricProjectionPF, MultipleModelGPF
 from gpf_nav.filters.kernel import match_moments
 from gpf_nav.linalg import positive_definite
 from gpf_nav.kernels import cloud, covariance, information, orbit
-from gpf_nav.kernels import flattening as fl_kernels
-from gpf_nav.kernels.flattening import departure, largest_scaled
+from gpf_nav.kernels import curvature as curvature_kernels
+from gpf_nav.kernels.curvature import departure, largest_scaled
 from gpf_nav.kernels.systematic import systematic_ancestors
 from gpf_nav.models.compensation import ModelErrorCompensation
 from gpf_nav.models.lunar import MU_MOON, LunarDescentModel
@@ -197,15 +197,15 @@ def test_the_flattening_departures_are_the_numpy_ones(count):
     mean, jacobian = x.mean(axis=1), rng.standard_normal((3, 9))
     for residual in (rng.standard_normal((count, 3)), np.asfortranarray(rng.standard_normal((count, 3)))):
         expected = residual - (x.T - mean) @ jacobian.T
-        for kernel in (departure, fl_kernels._departure_parallel):
+        for kernel in (departure, curvature_kernels._departure_parallel):
             out = np.full((count, 9), np.nan)
             kernel(residual, x, mean, jacobian, out, 3)
             _close(out[:, 3:6], expected, atol=1e-12 * np.abs((x.T - mean) @ np.abs(jacobian).T).max())
             assert np.isnan(out[:, :3]).all() and np.isnan(out[:, 6:]).all()
         serial = np.empty((count, 3))
-        fl_kernels._departure_serial(residual, x, mean, jacobian, serial, 0)
+        curvature_kernels._departure_serial(residual, x, mean, jacobian, serial, 0)
         parallel = np.empty((count, 3))
-        fl_kernels._departure_parallel(residual, x, mean, jacobian, parallel, 0)
+        curvature_kernels._departure_parallel(residual, x, mean, jacobian, parallel, 0)
         np.testing.assert_array_equal(parallel, serial)
 
 

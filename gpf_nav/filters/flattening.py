@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gpf_nav.kernels.flattening import departure, largest_scaled
+from gpf_nav.kernels.curvature import departure, largest_scaled
 from gpf_nav.models.state_space import StateSpaceModel
 from gpf_nav.sensors.sensor import Sensor
 
@@ -43,7 +43,7 @@ coordinates (:meth:`Flattening.flatten`), and changes of it below which the map 
 RANK_TOLERANCE = 1e-8
 """Singular values of the noise-whitened rows ahead below this fraction of the largest are dropped."""
 _NONE = np.zeros((0, 0))
-"""No previous curvature (:func:`~gpf_nav.kernels.flattening.largest_scaled`)."""
+"""No previous curvature (:func:`~gpf_nav.kernels.curvature.largest_scaled`)."""
 
 
 @dataclass(frozen=True)
