@@ -67,4 +67,9 @@ def largest_scaled(nu: np.ndarray, previous: np.ndarray, scale: np.ndarray) -> f
             value = abs(((nu[j, k] - previous[j, k]) if change else nu[j, k]) / scale[k])
             largest[k] = value if value > largest[k] else largest[k]
             nan |= value != value
-    return math.nan if nan else largest.max()
+    if nan:
+        return math.nan
+    result = 0.0
+    for k in range(largest.size):  # (not largest.max(): compiling numpy's reduction takes a second)
+        result = largest[k] if largest[k] > result else result
+    return result

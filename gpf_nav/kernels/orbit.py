@@ -93,7 +93,7 @@ def _leapfrog_parallel(x, gm, h, steps, u):
     return out
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _frame_times(a0, a1, a2, t0, t1, t2, n0, n1, n2, c0, c1, c2):
     """``F c`` for the frame of axes ``a``, ``t``, ``n`` (columns), each component summed as :func:`push`
     sums it (from 0, over the axes in turn)."""
@@ -242,13 +242,13 @@ def leapfrog_jacobian(x: np.ndarray, gm: float, h: float, steps: int, u: np.ndar
     return out
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _finite(a0, a1, a2, t0, t1, t2, n0, n1, n2):
     return (math.isfinite(a0) & math.isfinite(a1) & math.isfinite(a2) & math.isfinite(t0) & math.isfinite(t1)
             & math.isfinite(t2) & math.isfinite(n0) & math.isfinite(n1) & math.isfinite(n2))
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _planar_axes(r0, r1, r2, v0, v1, v2):
     """``(planar, nine floats)``: whether ``(r, v)`` spans an orbit plane, and the radial, along-track and
     cross-track axes of the osculating orbit (its radial axis whether or not; the other two only when
@@ -264,7 +264,7 @@ def _planar_axes(r0, r1, r2, v0, v1, v2):
     return planar, a0, a1, a2, t0, t1, t2, n0, n1, n2
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _axes(r0, r1, r2, v0, v1, v2):
     """The radial, along-track and cross-track axes of the osculating orbit of ``(r, v)``, nine floats
     (:func:`frames`)."""
@@ -284,12 +284,14 @@ def _axes(r0, r1, r2, v0, v1, v2):
 
 @njit(cache=True, error_model="numpy")
 def _frames_block(x, start, stop, frame):
-    """:func:`frames` of the particles ``start`` to ``stop`` of ``x`` into ``frame``."""
+    """:func:`frames` of the particles ``start`` to ``stop`` of ``x`` into ``frame`` (a scalar loop: the
+    lunar model's frames are taken at a few points at a time; its transition makes them in
+    :func:`pushed_leapfrog`)."""
     for j in range(start, stop):
-        axes = _axes(x[0, j], x[1, j], x[2, j], x[3, j], x[4, j], x[5, j])
-        for c in range(3):
-            for axis in range(3):
-                frame[c, axis, j] = axes[3 * axis + c]
+        a0, a1, a2, t0, t1, t2, n0, n1, n2 = _axes(x[0, j], x[1, j], x[2, j], x[3, j], x[4, j], x[5, j])
+        frame[0, 0, j], frame[1, 0, j], frame[2, 0, j] = a0, a1, a2
+        frame[0, 1, j], frame[1, 1, j], frame[2, 1, j] = t0, t1, t2
+        frame[0, 2, j], frame[1, 2, j], frame[2, 2, j] = n0, n1, n2
 
 
 @njit(cache=True, error_model="numpy")
