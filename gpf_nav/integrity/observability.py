@@ -167,7 +167,7 @@ class ObservabilityTracker:
             except (ValueError, FloatingPointError, ArithmeticError):
                 return
         points.reverse()
-        if not all(np.isfinite(p).all() for p in points):
+        if not np.isfinite(np.concatenate(points)).all():
             return
         free, data, step = self._prior, self._prior.copy(), 0
         for entry in log.entries:
@@ -180,8 +180,10 @@ class ObservabilityTracker:
                                                        _matrix(points[step][0]), free, data)
             else:
                 sensor, rows, t = entry
-                H = _matrix(sensor.jacobian(x, t)[0][rows])
-                R = _matrix(sensor.noise(t)[np.ix_(rows, rows)])
+                H, R = sensor.jacobian(x, t)[0], sensor.noise(t)
+                if not rows.all():
+                    H, R = H[rows], R[np.ix_(rows, rows)]
+                H, R = _matrix(H), _matrix(R)
                 outcome, updated = information.update(H, R, _EMPTY, free, data, 0.0)
                 if outcome == information.UPDATED:
                     data = updated
