@@ -30,7 +30,36 @@ def weighted_mean(x: np.ndarray, w: np.ndarray) -> np.ndarray:
     return mean
 
 
+@njit(cache=True, error_model="numpy")
+def _scaled_block(x, mean, w, start, root, scale):
+    """Rows ``sqrt(w) (x - mean)`` of the particles ``start`` to ``start + CHUNK`` into ``root`` ``(n, CHUNK)``
+    (``scale`` ``(CHUNK,)``: the square roots); returns how many particles the block has. Rows indexed
+    through views, so the loops vectorise."""
+    size = min(scale.size, x.shape[1] - start)
+    weights = w[start:start + size]
+    for t in range(size):
+        scale[t] = math.sqrt(weights[t])
+    for a in range(x.shape[0]):
+        row, centre, out = x[a, start:start + size], mean[a], root[a, :size]
+        for t in range(size):
+            out[t] = (row[t] - centre) * scale[t]
+    return size
+
+
 @njit(cache=True, error_model="numpy", fastmath={"reassoc"})
+def _add_products(root, size, cov):
+    """Add the products of the first ``size`` columns of ``root`` ``(n, CHUNK)``, row by row, to the upper
+    triangle of ``cov`` ``(n, n)`` (sums in any order: they vectorise)."""
+    n = root.shape[0]
+    for a in range(n):
+        for b in range(a, n):
+            s = 0.0
+            for t in range(size):
+                s += root[a, t] * root[b, t]
+            cov[a, b] += s
+
+
+@njit(cache=True, error_model="numpy")
 def _moments(x, w):
     n, count = x.shape
     mean = weighted_mean(x, w)
@@ -38,18 +67,7 @@ def _moments(x, w):
     root = np.empty((n, CHUNK))
     scale = np.empty(CHUNK)
     for start in range(0, count, CHUNK):  # rows of sqrt(w) (x - mean) in a small buffer, their products
-        size = min(CHUNK, count - start)
-        for t in range(size):
-            scale[t] = math.sqrt(w[start + t])
-        for a in range(n):
-            for t in range(size):
-                root[a, t] = (x[a, start + t] - mean[a]) * scale[t]
-        for a in range(n):
-            for b in range(a, n):
-                s = 0.0
-                for t in range(size):
-                    s += root[a, t] * root[b, t]
-                cov[a, b] += s
+        _add_products(root, _scaled_block(x, mean, w, start, root, scale), cov)
     for a in range(n):
         for b in range(a):
             cov[a, b] = cov[b, a]
