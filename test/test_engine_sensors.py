@@ -6,6 +6,7 @@ import pytest
 
 from gpf_nav.estimator.engine import EngineConfig, EstimatorEngine
 from gpf_nav.estimator.factory import make_filter
+from gpf_nav.estimator.history import SNAPSHOT_EVERY
 from gpf_nav.filters import SensorBiasFilter
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 from gpf_nav.sim.sensor_suite import SuiteConfig, generate_suite, suite_sensors
@@ -82,7 +83,27 @@ def test_stamps_older_than_the_history_or_the_start_are_refused():
     ok, _ = engine.measurement(t - 4 * S, fix, None, "position", sensors["position"])
     assert ok and engine.late_count == 1 and engine.t_ns == t
     assert engine.counters.rejected_by_stream[("position", "older_than_history")] == 1
-    assert len(engine.history) <= 5 / scenario.config.dt + 2
+    # the window's inputs, and those back to the last snapshot before them
+    assert len(engine.history) <= 5 / scenario.config.dt + 2 + SNAPSHOT_EVERY - 1
+    snapshots = [k for k, e in enumerate(engine.history.entries) if e.before is not None]
+    assert snapshots[0] == 0 and np.all(np.diff(snapshots) <= SNAPSHOT_EVERY)
+
+
+def test_a_late_input_restarts_from_the_last_snapshot_before_it():
+    """Snapshots every SNAPSHOT_EVERY inputs: a late input re-applies the kept inputs from the last one
+    with a snapshot, those before it included, and the estimate is that of in-order delivery."""
+    scenario, suite, sensors, engine = _setup("gpf", history_length=60.0)
+    *_, in_order = _setup("gpf", history_length=60.0)
+    events = [e for e in _events(scenario, suite) if e[1] == "rae"][:12]
+    fix = suite.position[np.flatnonzero(np.isfinite(suite.position[:, 0]))[0]]
+    late = (events[5][0] + S // 2, "position", fix)  # between the 6th and the 7th input
+    _run(engine, sensors, events)
+    assert [e.before is not None for e in engine.history.entries] == [k % SNAPSHOT_EVERY == 0 for k in range(12)]
+    _run(engine, sensors, [late])
+    assert engine.late_count == 1 and engine.replayed_count == 12 - 4  # from the 5th input (a snapshot) on
+    mean, cov = _run(in_order, sensors, sorted(events + [late], key=lambda e: e[0]))
+    np.testing.assert_array_equal(engine.mean, mean)
+    np.testing.assert_array_equal(engine.cov, cov)
 
 
 def test_without_history_a_late_stamp_is_stale():

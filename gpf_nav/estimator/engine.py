@@ -295,15 +295,19 @@ class EstimatorEngine:
         return True, ""
 
     def _late(self, stamp_ns: int, y: np.ndarray, stream: str, sensor) -> str:
-        """Fuse a measurement stamped before the filter's time at its stamp, then re-apply the inputs
-        stamped after it (their counters are not counted again; the monitor is not fed again)."""
-        redo = self.history.take(self.history.split(stamp_ns))
+        """Fuse a measurement stamped before the filter's time at its stamp: restore the last snapshot
+        before it, re-apply the inputs between, then the late one, then the inputs stamped after it
+        (their counters are not counted again; the monitor is not fed again)."""
+        i, j = self.history.split(stamp_ns)
+        redo = self.history.take(j)
         first = redo[0]
         self.filter, self.t_ns, self._streaks = first.before, first.before_ns, dict(first.streaks)
         self._core_recoveries = self.filter.recoveries
         self._shadow = None
+        for entry in redo[:i - j]:
+            self._update(entry.t_ns, entry.y, entry.stream, entry.sensor, feed_monitor=False)
         reason = self._update(stamp_ns, y, stream, sensor)
-        for entry in redo:
+        for entry in redo[i - j:]:
             self._update(entry.t_ns, entry.y, entry.stream, entry.sensor, feed_monitor=False)
         self.late_count += 1
         self.replayed_count += len(redo)
@@ -313,7 +317,9 @@ class EstimatorEngine:
                 feed_monitor: bool = True) -> str:
         """Predict to ``stamp_ns`` and update with ``y``: ``""`` when updated, ``"innovation_gate"`` when
         the gate refused it (predicted only), ``"filter_error"`` after a recovery."""
-        before = self._snapshot()
+        keep = self.history.length_ns > 0
+        before = self._snapshot() if keep and self.history.wants_snapshot() else None
+        keep = keep and (before is not None or len(self.history) > 0)  # (a failed copy emptied the history)
         entry = Entry(stamp_ns, stream, y, sensor, before, self.t_ns, dict(self._streaks))
         try:
             self._predict_to(stamp_ns)
@@ -331,7 +337,7 @@ class EstimatorEngine:
         if not self._store(stamp_ns):
             self._recover(stamp_ns, "non-finite mean or covariance after the update")
             return "filter_error"
-        if before is not None:
+        if keep:
             self.history.append(entry)
         if gated:
             return "innovation_gate"
@@ -341,10 +347,8 @@ class EstimatorEngine:
         return ""
 
     def _snapshot(self):
-        """A deep copy of the filter for the history (None without a history). A filter that cannot be
-        copied empties the history: late stamps before this input are then ``older_than_history``."""
-        if self.history.length_ns <= 0:
-            return None
+        """A deep copy of the filter for the history. A filter that cannot be copied empties the history
+        (None): late stamps before this input are then ``older_than_history``."""
         try:
             return copy.deepcopy(self.filter)
         except Exception:  # noqa: BLE001 - e.g. a user's filter wrapper: go on without late fusion

@@ -1,16 +1,18 @@
-"""Bounded history of the inputs the filter took, each with a snapshot of what it took them from.
+"""Bounded history of the inputs the filter took, every :data:`SNAPSHOT_EVERY`-th with a snapshot of what
+it took it from.
 
 A late measurement (stamped before the filter's time, within ``length_ns``) is fused at its own stamp
-by restoring the snapshot taken before the first input stamped after it, applying it, and re-applying
-the inputs that came after (:meth:`gpf_nav.estimator.engine.EstimatorEngine.measurement`). A snapshot
-is a deep copy of the filter, so it holds everything an update depends on (particles, weights, the
-generator's state, gate streaks); re-application therefore gives bit for bit the estimate of in-order
-delivery. No ROS here.
+by restoring the last snapshot taken before the first input stamped after it, re-applying the inputs
+between, applying the late one, and re-applying the inputs that came after
+(:meth:`gpf_nav.estimator.engine.EstimatorEngine.measurement`). A snapshot is a deep copy of the filter,
+so it holds everything an update depends on (particles, weights, the generator's state, gate streaks);
+re-application therefore gives bit for bit the estimate of in-order delivery. No ROS here.
 
-Memory: one filter copy per input of the last ``length_ns`` (for the lunar GPF with N particles about
-``N * 9 * 8`` bytes of particles plus their weights and caches). Cost: restoring is free (the
-snapshot object becomes the filter); re-applying ``k`` inputs costs ``k + 1`` predict/update steps
-and ``k + 1`` copies.
+Memory: one filter copy per :data:`SNAPSHOT_EVERY` inputs of the last ``length_ns`` (for the lunar GPF with
+N particles about ``N * 9 * 8`` bytes of particles plus their weights and caches). Cost: a copy every
+:data:`SNAPSHOT_EVERY` inputs (0.3 ms for the default GPF at N = 500, a tenth of its step); restoring is
+free (the snapshot object becomes the filter); a late input stamped before ``k`` kept ones costs up to
+``k + SNAPSHOT_EVERY`` predict/update steps.
 """
 from __future__ import annotations
 
@@ -19,12 +21,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+SNAPSHOT_EVERY = 4
+"""Inputs per snapshot: a late input re-applies at most ``SNAPSHOT_EVERY - 1`` more of them."""
+
 
 @dataclass
 class Entry:
     """One input the filter took: ``y`` ``(m,)`` stamped ``t_ns`` of ``stream`` with ``sensor`` (None:
-    the model's own), and ``before``: the filter state it was applied to, at ``before_ns``, with the
-    engine's per-stream gate streaks then."""
+    the model's own), and ``before``: the filter state it was applied to (None: not kept, see
+    :data:`SNAPSHOT_EVERY`), at ``before_ns``, with the engine's per-stream gate streaks then."""
 
     t_ns: int
     stream: str
@@ -52,28 +57,42 @@ class History:
     def clear(self) -> None:
         self.entries = []
 
+    def wants_snapshot(self) -> bool:
+        """Whether the next input should keep a snapshot: when none of the last :data:`SNAPSHOT_EVERY` - 1
+        kept inputs has one."""
+        recent = self.entries[-(SNAPSHOT_EVERY - 1):] if SNAPSHOT_EVERY > 1 else []
+        return all(e.before is None for e in recent)
+
     def append(self, entry: Entry) -> None:
-        """Add an input stamped at or after every other one, then drop those out of the window."""
+        """Add an input stamped at or after every other one, then drop those out of the window (but the
+        last one with a snapshot before the first one kept, which restoring it needs)."""
         self.entries.append(entry)
         horizon = entry.t_ns - self.length_ns
         drop = 0
         while drop < len(self.entries) and self.entries[drop].t_ns < horizon:
             drop += 1
+        while 0 < drop < len(self.entries) and self.entries[drop].before is None:
+            drop -= 1
         del self.entries[:drop]
 
-    def split(self, stamp_ns: int) -> int | None:
-        """Index of the first input stamped after ``stamp_ns`` (a late input goes before it), or None
-        when ``stamp_ns`` is older than the window: before the oldest kept snapshot's time."""
+    def split(self, stamp_ns: int) -> tuple[int, int] | None:
+        """``(i, j)``: the index ``i`` of the first input stamped after ``stamp_ns`` (a late input goes
+        before it) and ``j <= i`` of the last input with a snapshot up to it (where re-application
+        starts); None when ``stamp_ns`` is older than the window (before the time of the state kept for
+        ``i``) or no snapshot precedes it."""
         stamps = [e.t_ns for e in self.entries]
         i = bisect.bisect_right(stamps, stamp_ns)
         if i == len(self.entries) or stamp_ns < self.entries[i].before_ns:
             return None
         if self.entries and stamp_ns < self.entries[-1].t_ns - self.length_ns:
             return None
-        return i
+        j = i
+        while j >= 0 and self.entries[j].before is None:
+            j -= 1
+        return None if j < 0 else (i, j)
 
-    def take(self, i: int) -> list[Entry]:
-        """Remove and return the inputs from index ``i`` on (to be re-applied)."""
-        out = self.entries[i:]
-        del self.entries[i:]
+    def take(self, j: int) -> list[Entry]:
+        """Remove and return the inputs from index ``j`` on (to be re-applied)."""
+        out = self.entries[j:]
+        del self.entries[j:]
         return out

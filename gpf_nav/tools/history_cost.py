@@ -2,7 +2,8 @@
 
 Runs :class:`gpf_nav.estimator.engine.EstimatorEngine` (no ROS) on a 120 s descent with rae every 2 s
 and the sensor suite (altimeter and velocimeter every 2 s, a TRN fix every 10 s delivered 4 s late) and
-prints, per filter: inputs kept in the history, the size of one snapshot (pickled filter), the time of
+prints, per filter: inputs kept in the history and the snapshots among them (one per
+:data:`~gpf_nav.estimator.history.SNAPSHOT_EVERY` inputs), the size of one snapshot (pickled filter), the time of
 a snapshot copy, of an in-order measurement (snapshot included) and of a late fix (restore, update and
 re-application of the inputs stamped after it). Wall-clock figures: indicative on a loaded machine.
 """
@@ -50,11 +51,11 @@ def measure(name: str, n_particles: int, latency: float = 4.0, seed: int = 3) ->
         (late if is_late else in_order).append(time.perf_counter() - start)
         if is_late:
             reapplied.append(engine.replayed_count - before)
-    sizes = [len(pickle.dumps(e.before)) for e in engine.history.entries]
+    sizes = [len(pickle.dumps(e.before)) for e in engine.history.entries if e.before is not None]
     start = time.perf_counter()
     for _ in range(20):
         copy.deepcopy(engine.filter)
-    return dict(filter=name, n=n_particles, inputs=len(sizes), snapshot_kb=np.mean(sizes) / 1e3,
+    return dict(filter=name, n=n_particles, inputs=len(engine.history), snapshots=len(sizes), snapshot_kb=np.mean(sizes) / 1e3,
                 history_mb=sum(sizes) / 1e6, copy_ms=(time.perf_counter() - start) / 20 * 1e3,
                 in_order_ms=np.median(in_order) * 1e3, late_ms=np.median(late) * 1e3,
                 reapplied=float(np.median(reapplied)), late_fixes=len(late))
@@ -67,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     for item in args.filters.split(","):
         name, n = item.split(":")
         r = measure(name, int(n))
-        print(f"{r['filter']} N={r['n']}: {r['inputs']} inputs in the history, snapshot {r['snapshot_kb']:.0f} kB "
+        print(f"{r['filter']} N={r['n']}: {r['inputs']} inputs in the history, {r['snapshots']} snapshots of {r['snapshot_kb']:.0f} kB "
               f"(all {r['history_mb']:.2f} MB), copy {r['copy_ms']:.2f} ms; in-order measurement "
               f"{r['in_order_ms']:.2f} ms (median), late fix {r['late_ms']:.2f} ms re-applying "
               f"{r['reapplied']:.0f} inputs (median of {r['late_fixes']})")
