@@ -210,10 +210,13 @@ def test_the_flattening_departures_are_the_numpy_ones(count):
 
 
 class _WithoutFastPath(LunarDescentModel):
-    """The lunar model as a user's framed model would be: no compensated fast path."""
+    """The lunar model as a user's framed model would be: no compensated fast paths."""
 
     def pushed_transition(self, *args):
         return False
+
+    def compensation_push_derivative(self, *args):
+        return None
 
 
 @pytest.mark.parametrize("inputs", ("none", "each"))
@@ -224,6 +227,22 @@ def test_the_compensated_fast_path_is_the_generic_transition_bit_for_bit(inputs)
     fast = ModelErrorCompensation(LunarDescentModel(), 1e6, 0.1).transition(x.T, 25.0, 0.0, u)
     generic = ModelErrorCompensation(_WithoutFastPath(), 1e6, 0.1).transition(x.T, 25.0, 0.0, u)
     np.testing.assert_array_equal(fast, generic)
+
+
+@pytest.mark.parametrize("count", (1, 7, 300))
+def test_the_compensated_jacobian_fast_path_is_the_generic_one_bit_for_bit(count):
+    """The frame's central differences in one kernel against the generic differences of the frames,
+    degenerate orbits (no plane, r = 0, NaN), signed zeros and infinities included."""
+    rng = np.random.default_rng(81)
+    x = np.ascontiguousarray(np.vstack([_orbits(rng, count), rng.standard_normal((3, count)) * 1e-3]))
+    if count >= 7:
+        x[:, 4:6] = [[0.0, 1.8e6], [-0.0, np.inf], [1.0, 0.0], [0.0, 1.0], [-0.0, 0.0], [0.0, 0.0], [0.0, 1e-3],
+                     [-0.0, 0.0], [2e-3, 0.0]]
+    with np.errstate(invalid="ignore"):  # (inf - inf in the shifted states)
+        fast = ModelErrorCompensation(LunarDescentModel(), 1e6, 0.1).transition_jacobian(x.T, 2.0)
+        generic = ModelErrorCompensation(_WithoutFastPath(), 1e6, 0.1).transition_jacobian(x.T, 2.0)
+    np.testing.assert_array_equal(fast, generic)
+    np.testing.assert_array_equal(np.signbit(fast), np.signbit(generic))
 
 
 def test_compensated_lunar_transition_is_the_numpy_one():

@@ -179,6 +179,9 @@ class ModelErrorCompensation(StateSpaceModel):
     def _push_derivative(self, x: np.ndarray, a: np.ndarray) -> np.ndarray:
         """``d(F(x) a) / dx`` ``(N, p, n)`` of the pushed acceleration at base states ``x`` ``(N, n)`` with
         ``a`` ``(N, p)`` held, by central differences of the frame ``F`` (one call on ``2 n N`` states)."""
+        derivative = self.base.compensation_push_derivative(x, a, FRAME_STEP)
+        if derivative is not None:
+            return derivative
         count, n = x.shape
         steps = FRAME_STEP * np.maximum(np.abs(x), 1.0)  # (N, n)
         shifts = np.einsum("nj,jk->jnk", steps, np.eye(n))  # (n, N, n): component j of particle i moved

@@ -115,6 +115,12 @@ class LunarDescentModel(StateSpaceModel):
         (:mod:`gpf_nav.models.compensation` takes the particle-last array back)."""
         return orbit.frames(_particle_last(x)).transpose(2, 0, 1)
 
+    def compensation_push_derivative(self, x, a, relative_step):
+        """The central differences of the compensation's Jacobian in one kernel
+        (:func:`gpf_nav.kernels.orbit.push_derivative`)."""
+        return orbit.push_derivative(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(a, dtype=float),
+                                     float(relative_step))
+
     def process_noise(self, dt):
         """White-acceleration ``Q(dt)``, read-only, kept for the last ``dt`` (the GPF reads it at every
         update)."""

@@ -158,6 +158,15 @@ class StateSpaceModel(ABC):
         :meth:`compensation_frame`, with the same numbers."""
         return False
 
+    def compensation_push_derivative(self, x: np.ndarray, a: np.ndarray, relative_step: float
+                                     ) -> np.ndarray | None:
+        """Optional fast path of the compensated transition's Jacobian (:mod:`gpf_nav.models.compensation`):
+        ``d(F(x) a) / dx`` ``(N, p, n)`` of the acceleration ``a`` ``(N, p)`` turned by
+        :meth:`compensation_frame` at the states ``x`` ``(N, n)``, by central differences with the steps
+        ``relative_step * max(|x|, 1)``. None (the default): the compensation differences
+        :meth:`compensation_frame` itself, with the same numbers."""
+        return None
+
     def measure_and_jacobian(self, x: np.ndarray, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """``(h(x, t) (N, m), H(x, t) (N, m, n))`` together; override to share work between the two."""
         return self.measure(x, t), self.measurement_jacobian(x, t)
