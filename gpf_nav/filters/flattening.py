@@ -133,9 +133,9 @@ def flattening(x: np.ndarray, weights: np.ndarray, rows: np.ndarray, sensor: Sen
     n = x.shape[0]
     k = int(rows.sum())
     gain = np.zeros((n, k * (1 + len(lags))))
-    noise_std = np.sqrt(np.tile(np.diag(sensor.noise(time))[rows], 1 + len(lags)))
+    noise_std = np.concatenate([np.sqrt(np.diag(sensor.noise(time))[rows])] * (1 + len(lags)))
     gain[:user_dim, :k] = first
-    steps = tuple(np.diff((0.0, *lags)).tolist())
+    steps = tuple(float(later) - float(earlier) for earlier, later in zip((0.0, *lags), lags))
     ahead = []
     if lags:
         flowed, t, F = mean[None], time, np.eye(n)
@@ -154,6 +154,6 @@ def flattening(x: np.ndarray, weights: np.ndarray, rows: np.ndarray, sensor: Sen
         gain[:user_dim, :k] -= inverse @ (later @ first)
         gain[:user_dim, k:] = inverse
     arrays = (h, H, gain, *(a for pair in ahead for a in pair))
-    if not all(np.isfinite(a).all() for a in arrays):
+    if not np.isfinite(np.concatenate([a.ravel() for a in arrays])).all():
         return None
     return Flattening(mean, h, H, rows, gain, noise_std, steps, tuple(ahead), float(time), sensor, model, u)
