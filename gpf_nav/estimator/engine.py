@@ -12,9 +12,9 @@ of ROS time. Rules:
   sigma when it has bias states): refused as ``innovation_gate`` (the filter
   stays predicted to ``t``) unless ``gate_limit`` were refused in a row.
 * A measurement stamped before the filter's time, by at most ``history_length`` s, is fused at its own
-  stamp: the filter is restored from the snapshot taken before the first input stamped after it (see
-  :mod:`gpf_nav.estimator.history`), updated with it, and the later inputs are re-applied; the result
-  equals in-order delivery bit for bit. Older stamps are refused (``older_than_history``), and so are
+  stamp: the filter is restored from the last snapshot taken before it (see
+  :mod:`gpf_nav.estimator.history`), the inputs between are re-applied, it is updated with the late
+  input, and the later inputs are re-applied; the result equals in-order delivery bit for bit. Older stamps are refused (``older_than_history``), and so are
   stamps within it but before the filter's (re-)initialisation (``stale_stamp``); more than ``max_future`` s ahead of the
   node clock too (``future_stamp``). With ``history_length`` 0 every stamp before the filter's time is
   ``stale_stamp``.
