@@ -235,6 +235,7 @@ def test_the_compensated_jacobian_fast_path_is_the_generic_one_bit_for_bit(count
     degenerate orbits (no plane, r = 0, NaN), signed zeros and infinities included."""
     rng = np.random.default_rng(81)
     x = np.ascontiguousarray(np.vstack([_orbits(rng, count), rng.standard_normal((3, count)) * 1e-3]))
+    x[6:, -1] = [0.0, -0.0, 0.0]  # no acceleration: every pushed term a signed zero
     if count >= 7:
         x[:, 4:6] = [[0.0, 1.8e6], [-0.0, np.inf], [1.0, 0.0], [0.0, 1.0], [-0.0, 0.0], [0.0, 0.0], [0.0, 1e-3],
                      [-0.0, 0.0], [2e-3, 0.0]]

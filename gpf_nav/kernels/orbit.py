@@ -319,19 +319,12 @@ def frames(x: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy")
-def _axes_times(x, c0, c1, c2):
-    """``F c`` for the frame :func:`_axes` of the state ``x`` ``(6,)``, each component summed over the axes
-    in turn (as numpy's ``einsum`` sums it over :func:`frames` in :mod:`gpf_nav.models.compensation`)."""
-    a0, a1, a2, t0, t1, t2, n0, n1, n2 = _axes(x[0], x[1], x[2], x[3], x[4], x[5])
-    return (a0 * c0 + t0 * c1) + n0 * c2, (a1 * c0 + t1 * c1) + n1 * c2, (a2 * c0 + t2 * c1) + n2 * c2
-
-
-@njit(cache=True, error_model="numpy")
 def push_derivative(x: np.ndarray, a: np.ndarray, relative_step: float) -> np.ndarray:
     """``d(F(x) a) / dx`` ``(N, 3, 6)`` of the acceleration ``a`` ``(N, 3)`` pushed by the frame at the
     states ``x`` ``(N, 6)`` (:func:`frames`), held fixed, by central differences with the steps
     ``relative_step * max(|x|, 1)``: the numbers of the generic central differences of
-    :mod:`gpf_nav.models.compensation` over :func:`frames`, in one pass (a point's Jacobian is taken three
+    :mod:`gpf_nav.models.compensation` over :func:`frames` (each ``F a`` summed as numpy's ``einsum`` sums it
+    there, from 0 over the axes in turn: :func:`_frame_times`), in one pass (a point's Jacobian is taken three
     times per step, and at every logged step when the observability tracker rebuilds)."""
     out = np.empty((x.shape[0], 3, 6))
     moved = np.empty(6)
@@ -342,10 +335,10 @@ def push_derivative(x: np.ndarray, a: np.ndarray, relative_step: float) -> np.nd
             step = relative_step * (size if (size > 1.0 or size != size) else 1.0)  # (numpy's maximum)
             for k in range(6):  # x + step e_j and x - step e_j, every component shifted (by step * 0 but j)
                 moved[k] = x[m, k] + step * (1.0 if k == j else 0.0)
-            p0, p1, p2 = _axes_times(moved, c0, c1, c2)
+            p0, p1, p2 = _frame_times(*_axes(moved[0], moved[1], moved[2], moved[3], moved[4], moved[5]), c0, c1, c2)
             for k in range(6):
                 moved[k] = x[m, k] - step * (1.0 if k == j else 0.0)
-            q0, q1, q2 = _axes_times(moved, c0, c1, c2)
+            q0, q1, q2 = _frame_times(*_axes(moved[0], moved[1], moved[2], moved[3], moved[4], moved[5]), c0, c1, c2)
             twice = 2.0 * step
             out[m, 0, j], out[m, 1, j], out[m, 2, j] = (p0 - q0) / twice, (p1 - q1) / twice, (p2 - q2) / twice
     return out
