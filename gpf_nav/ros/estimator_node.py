@@ -162,6 +162,9 @@ class EstimatorNode(LifecycleNode):
         p = self.params
         self.core = MessageLayer(p, self._publish, self.get_logger(), wants_particles=self._wants_particles)
         self.engine = self.core.engine
+        if p["warm_up"]:  # before any subscription: nothing piles up while the kernels load
+            ok, line = self.core.warm_up()
+            (self.get_logger().info if ok else self.get_logger().warning)(line)
         self.ignored.clear()
         sensor_qos = QoSProfile(reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST,
                                 depth=p["queue_depth"], durability=DurabilityPolicy.VOLATILE)

@@ -36,9 +36,11 @@ from gpf_nav.estimator.factory import make_filter, make_lunar_model
 from gpf_nav.estimator.params import ParameterError, check_estimator_parameters, filter_options
 from gpf_nav.estimator.sensor_setup import build_sensors, gates, with_biases
 from gpf_nav.estimator.streams import STREAMS, Stream
+from gpf_nav.estimator.warm_up import warm_up
 from gpf_nav.filters.interface import CLOUD
 from gpf_nav.integrity.consistency import WARN_FALSE_ALARM_RATE
 from gpf_nav.ros.stream_messages import MESSAGE_TYPES
+from gpf_nav.sim.scenario import ScenarioConfig, initial_state
 
 LOG_THROTTLE = 5.0  # s (wall clock) between two log lines about the same refusal reason
 
@@ -59,6 +61,9 @@ INPUT_TOPICS = input_topics(STREAMS)
 OUTPUT_TOPICS = {"odometry/filtered": Odometry, "gpf/ess": Float64, "gpf/costate": Vector3Stamped,
                  "gpf/unmodelled_acceleration": Vector3Stamped, "gpf/particles": PoseArray,
                  "/diagnostics": DiagnosticArray}
+
+_WARMED: set = set()
+"""The filter configurations :meth:`MessageLayer.warm_up` ran in this process (its kernels are loaded)."""
 
 
 def monitor_options(p: dict) -> dict | None:
@@ -143,6 +148,22 @@ class MessageLayer:
                 f"initialisation from " + ("parameters" if p["initial_state"] is not None else
                                            f"set_state, set_pose or the first {p['init_window']} "
                                            "measurements"))
+
+    def warm_up(self) -> tuple[bool, str]:
+        """Load (or compile) the filter's kernels before the first message (:mod:`gpf_nav.estimator.warm_up`),
+        from the ``initial_state`` parameter or the Section 7 start; once per process and filter
+        configuration. False and why when it failed (the first update then waits for the kernels), and
+        one line saying what happened."""
+        p = self.params
+        key = (self.filter_name, tuple(sorted(filter_options(p).items())))
+        if key in _WARMED:
+            return True, "warm-up: this filter configuration already ran in this process"
+        state = initial_state(ScenarioConfig()) if p["initial_state"] is None else np.array(p["initial_state"])
+        seconds, error = warm_up(self.engine, state)
+        if error:
+            return False, f"warm-up failed after {seconds:.1f} s ({error}): the first update may wait for the kernels"
+        _WARMED.add(key)
+        return True, f"warm-up: the filter's kernels ready in {seconds:.1f} s"
 
     # --- inputs ----------------------------------------------------------------------------------------
     def handle(self, stream: str, msg, now_ns: int) -> None:
