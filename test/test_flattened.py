@@ -3,11 +3,15 @@ coordinates where the measurement is linear, so a curved measurement (a range ab
 narrow the cloud along the directions it cannot see."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from gpf_nav.filters import GeometricProjectionPF
-from gpf_nav.filters.flattening import flattening
+import gpf_nav.filters.flattening as flattening_module
+from gpf_nav.estimator.factory import make_filter
+from gpf_nav.filters.flattening import MOVE_LIMIT, flattening
 from gpf_nav.models import LinearGaussianModel
 from gpf_nav.sensors.model import ModelSensor
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate, undetermined_subspace
@@ -111,8 +115,7 @@ def test_the_flattened_coordinates_make_the_ranges_now_and_ahead_linear(lags):
     map back of ``xi`` measures ``g(m) + J (xi - m)``, now and at every lag."""
     _, model, x, weights = _range_only_cloud()
     rows = np.array([True, False, False])
-    flat = flattening(x, weights, rows, ModelSensor(model), model, 0.0, None, lags, model.state_dim)
-    xi = flat.flatten(x)
+    flat, xi = flattening(x, weights, rows, ModelSensor(model), model, 0.0, None, lags, model.state_dim)
     back = flat.unflatten(xi)
     np.testing.assert_allclose(back, x, rtol=0, atol=1e-3)  # (m and m/s: the round trip)
     linear = [flat.measured[0] + (xi.T - flat.mean) @ flat.jacobian[0]]
@@ -129,12 +132,11 @@ def test_a_straight_draw_in_the_flow_flattened_coordinates_keeps_the_ranges_ahea
     lags = (50.0, 100.0)
     change = {}
     for flow in (False, True):
-        flat = flattening(x, weights, rows, ModelSensor(model), model, 0.0, None, lags if flow else (),
-                          model.state_dim)
+        flat, xi = flattening(x, weights, rows, ModelSensor(model), model, 0.0, None, lags if flow else (),
+                              model.state_dim)
         rotations = undetermined_subspace(config, flat.mean)  # (6, 3)
         step = rotations[:, np.argmax(np.linalg.norm(rotations[:3], axis=0))]
         step = step * 20e3 / np.linalg.norm(step[:3])
-        xi = flat.flatten(x)
         moved = flat.unflatten(xi + step[:, None])
         change[flow] = np.abs(_ranges(model, moved, lags) - _ranges(model, flat.unflatten(xi), lags)).max(axis=0)
     assert (change[True] < 1.0).all(), change
@@ -164,3 +166,30 @@ def test_the_flattened_coordinates_move_the_users_states_only():
     flt._begin_update(np.array([True, False, False]))
     assert flt._flat is not None
     assert np.abs(flt._flat.gain[:6]).max() > 0.0 and not flt._flat.gain[6:].any()
+
+
+def _soak_cloud():
+    """The compensated GPF's predicted cloud before an angles-only update of a 5-minute soak
+    (``gpf_nav.tools.soak``, range masked at 230 s): ``(model, x (9, 500), weights, rows, time, u, lags)``."""
+    data = np.load(Path(__file__).parent / "data" / "angles_only_compensated_cloud.npz")
+    model = make_filter("gpf", filter_model(ScenarioConfig())).compensated.model
+    return (model, data["x"], data["weights"], data["rows"], float(data["time"]), data["u"],
+            tuple(data["lags"].tolist()))
+
+
+@pytest.mark.parametrize("limit", [MOVE_LIMIT, np.inf])
+def test_a_direction_the_rows_ahead_barely_see_does_not_throw_the_cloud_away(monkeypatch, limit):
+    """The rows ahead's smallest singular value is 1.5e-8 of the largest, just above RANK_TOLERANCE; its
+    inverse moves particles 9e4 cloud deviations and the map back runs away (a position sigma of 2e11 m was
+    published). Dropped by MOVE_LIMIT, the move stays within it and the map back returns the cloud."""
+    monkeypatch.setattr(flattening_module, "MOVE_LIMIT", limit)
+    model, x, weights, rows, time, u, lags = _soak_cloud()
+    flat, xi = flattening(x, weights, rows, ModelSensor(model), model, time, u, lags, model.base_state_dim)
+    spread = np.sqrt(np.cov(x[:3], aweights=weights).trace())
+    back = flat.unflatten(xi)
+    if limit == np.inf:  # the failure, as it was
+        assert np.sqrt(np.cov(xi[:3], aweights=weights).trace()) > 100 * spread
+        assert np.abs(back - x).max() > 1e9
+    else:
+        assert np.sqrt(np.cov(xi[:3], aweights=weights).trace()) < 2 * spread
+        np.testing.assert_allclose(back, x, rtol=0, atol=1e-3)

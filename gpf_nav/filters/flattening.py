@@ -22,8 +22,9 @@ same ranges, and the next measurements weigh the particles down).
 ``K`` is built in two stages so that the rows measured now stay exact when the stack is not of full rank
 (a symmetry of the problem, such as the rotation about the polar axis without azimuth, is in the null
 space of every row): ``K_0 = J_0^+`` on the user's state, then the rows ahead within its null space by a
-noise-whitened pseudo-inverse truncated at :data:`RANK_TOLERANCE`. The map back solves ``x + K nu(x) = xi``
-by :data:`ITERATIONS` fixed-point steps.
+noise-whitened pseudo-inverse truncated at :data:`RANK_TOLERANCE`, and without the directions along which
+it would move a particle of the cloud by more than :data:`MOVE_LIMIT` of the cloud's standard deviations. The
+map back solves ``x + K nu(x) = xi`` by :data:`ITERATIONS` fixed-point steps.
 """
 from __future__ import annotations
 
@@ -39,9 +40,16 @@ ITERATIONS = 3
 """Most fixed-point steps of the map back (:meth:`Flattening.unflatten`)."""
 NEGLIGIBLE = 1e-3
 """Curvature (in measurement noise standard deviations) below which the cloud is left in the state's
-coordinates (:meth:`Flattening.flatten`), and changes of it below which the map back has converged."""
+coordinates (:func:`flattening`), and changes of it below which the map back has converged."""
 RANK_TOLERANCE = 1e-8
 """Singular values of the noise-whitened rows ahead below this fraction of the largest are dropped."""
+MOVE_LIMIT = 100.0
+"""Largest move, in the cloud's standard deviations along it, that a direction of the rows ahead may give a
+particle. A direction they barely see (a singular value just above :data:`RANK_TOLERANCE`) turns a
+curvature of a fraction of the noise into a move far beyond the cloud, and the map back then runs away
+instead of converging (an angles-only update of the compensated GPF moved particles 9e4 cloud deviations
+and published a position sigma of 2e11 m). Such directions are dropped like those below the tolerance;
+on the lunar descent's campaigns the largest move is about 13 deviations (range only)."""
 _NONE = np.zeros((0, 0))
 """No previous curvature (:func:`~gpf_nav.kernels.curvature.largest_scaled`)."""
 
@@ -92,14 +100,6 @@ class Flattening:
                       np.ascontiguousarray(jacobian), nu, lag * m)
         return nu if self.rows.all() else nu[:, np.tile(self.rows, 1 + lags)]
 
-    def flatten(self, x: np.ndarray) -> np.ndarray | None:
-        """``xi`` ``(n, N)`` of the particles ``x`` ``(n, N)``; None when every particle's curvature is below
-        :data:`NEGLIGIBLE` (the coordinates are then the state's own, to that accuracy)."""
-        nu = self.curvature(x)
-        if not largest_scaled(nu, _NONE, self.noise_std) >= NEGLIGIBLE:  # (NaN: nothing to flatten with)
-            return None
-        return x + self.gain @ nu.T
-
     def unflatten(self, xi: np.ndarray) -> np.ndarray:
         """The particles ``x`` ``(n, N)`` whose flattened coordinates are ``xi`` ``(n, N)``: fixed-point steps
         ``x <- xi - K nu(x)`` until the curvature changes by less than :data:`NEGLIGIBLE` (at most
@@ -116,12 +116,13 @@ class Flattening:
 
 def flattening(x: np.ndarray, weights: np.ndarray, rows: np.ndarray, sensor: Sensor, model: StateSpaceModel,
                time: float, u: np.ndarray | None, lags: tuple[float, ...], user_dim: int
-               ) -> Flattening | None:
+               ) -> tuple[Flattening, np.ndarray] | None:
     """The flattened coordinates of the cloud ``x`` ``(n, N)`` with normalised ``weights`` ``(N,)`` for the
     measured ``rows`` ``(m,)`` of ``sensor`` at ``time``, flowed by ``model`` with the input ``u`` held to
     the increasing ``lags`` (s; none: the rows measured now only), moving the first ``user_dim``
-    components of the state only. None when the rows measured now are not of full rank at the mean or
-    anything is non-finite."""
+    components of the state only, and the cloud in them, ``xi`` ``(n, N)``. None when the rows measured now
+    are not of full rank at the mean, anything is non-finite, or every particle's curvature is below
+    :data:`NEGLIGIBLE` (the coordinates are then the state's own, to that accuracy)."""
     mean = np.einsum("in,n->i", x, weights)
     h, H = sensor.measure_and_jacobian(mean[None], time)
     h, H = h[0], H[0]
@@ -150,10 +151,52 @@ def flattening(x: np.ndarray, weights: np.ndarray, rows: np.ndarray, sensor: Sen
         A = (later - (later @ first) @ now) / noise_std[k:, None]
         U, s, Vt = np.linalg.svd(A, full_matrices=False)
         keep = s > RANK_TOLERANCE * s[0] if s.size and s[0] > 0.0 else np.zeros(s.size, bool)
-        inverse = (Vt[keep].T / s[keep]) @ U[:, keep].T / noise_std[k:]  # (n_user, k L)
-        gain[:user_dim, :k] -= inverse @ (later @ first)
-        gain[:user_dim, k:] = inverse
+        ahead_gain = _AheadGain(first, later @ first, U, s, Vt, noise_std[k:])
+        ahead_gain.write(gain, keep)
     arrays = (h, H, gain, *(a for pair in ahead for a in pair))
     if not np.isfinite(np.concatenate([a.ravel() for a in arrays])).all():
         return None
-    return Flattening(mean, h, H, rows, gain, noise_std, steps, tuple(ahead), float(time), sensor, model, u)
+    flat = Flattening(mean, h, H, rows, gain, noise_std, steps, tuple(ahead), float(time), sensor, model, u)
+    nu = flat.curvature(x)
+    if not largest_scaled(nu, _NONE, noise_std) >= NEGLIGIBLE:  # (NaN: nothing to flatten with)
+        return None
+    moves = gain @ nu.T  # (n, N)
+    if lags and keep.any():
+        runaway = _runaway(Vt[keep], moves[:user_dim], x[:user_dim], mean[:user_dim], weights)
+        if runaway.any():
+            keep[np.flatnonzero(keep)[runaway]] = False
+            ahead_gain.write(gain, keep)
+            moves = gain @ nu.T
+    return flat, x + moves
+
+
+@dataclass(frozen=True)
+class _AheadGain:
+    """The pieces of ``K``'s rows-ahead part: ``J_0^+`` ``(n_user, k)``, ``J_L J_0^+`` ``(k L, k)``, the SVD
+    ``U s Vt`` of the noise-whitened rows ahead within the null space of the rows now, and their noise
+    standard deviations ``(k L,)``."""
+
+    first: np.ndarray
+    later_first: np.ndarray
+    U: np.ndarray
+    s: np.ndarray
+    Vt: np.ndarray
+    noise_std: np.ndarray
+
+    def write(self, gain: np.ndarray, keep: np.ndarray) -> None:
+        """Write ``K`` ``(n, k + k L)`` into ``gain`` from the singular directions ``keep`` ``(r,)``."""
+        user_dim, k = self.first.shape
+        inverse = (self.Vt[keep].T / self.s[keep]) @ self.U[:, keep].T / self.noise_std  # (n_user, k L)
+        gain[:user_dim, :k] = self.first
+        gain[:user_dim, :k] -= inverse @ self.later_first
+        gain[:user_dim, k:] = inverse
+
+
+def _runaway(directions: np.ndarray, moves: np.ndarray, x: np.ndarray, mean: np.ndarray,
+             weights: np.ndarray) -> np.ndarray:
+    """``(r,)`` bool: the unit ``directions`` ``(r, n_user)`` along which some particle's move ``moves``
+    ``(n_user, N)`` exceeds :data:`MOVE_LIMIT` standard deviations of the cloud ``x`` ``(n_user, N)`` (weighted
+    ``mean`` ``(n_user,)`` and ``weights`` ``(N,)``); non-finite counts as exceeding."""
+    spread = np.sqrt(np.square(directions @ (x - mean[:, None])) @ weights)
+    reach = np.abs(directions @ moves).max(axis=1)
+    return ~(reach <= MOVE_LIMIT * spread)

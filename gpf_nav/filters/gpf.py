@@ -296,12 +296,10 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         in the state's coordinates."""
         if self.metric != "cloud" or self.linearization != "flattened":
             return
-        flat = flattening(self._x, self._weights, rows, self._sensor, self.model, self.time, self._input,
-                          self._flattening_lags, self.model.base_state_dim)
-        xi = None if flat is None else flat.flatten(self._x)
-        if xi is not None:
-            self._x = xi
-            self._flat = flat
+        flattened = flattening(self._x, self._weights, rows, self._sensor, self.model, self.time, self._input,
+                               self._flattening_lags, self.model.base_state_dim)
+        if flattened is not None:
+            self._flat, self._x = flattened
 
     @property
     def _flattening_lags(self) -> tuple[float, ...]:
