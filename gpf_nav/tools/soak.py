@@ -31,8 +31,10 @@ compared with the ``rejected <reason>`` and ``accepted rae`` counters of the est
 
 Pass/fail (exit code 0/1): the run completed, the estimator process was alive to the end and exited
 cleanly on SIGINT, counters match the prediction exactly, no ``internal_error`` or ``filter_error``, no
-non-finite number on any output, no ERROR/FATAL line or traceback in the estimator's log. RSS figures
-are reported, not judged. See docs/soak.md.
+non-finite number on any output, no ERROR/FATAL line or traceback in the estimator's log, and the
+estimate follows the truth: the median position error over the second half of the compared estimates
+is at most ``--max-error`` (a diverged filter ends thousands of kilometres off). RSS figures are
+reported, not judged. See docs/soak.md.
 """
 from __future__ import annotations
 
@@ -97,6 +99,8 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--rss-period", type=float, default=5.0, help="wall s between RSS samples (default 5)")
     ap.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: the environment's)")
     ap.add_argument("--timeout", type=float, default=None, help="wall-clock limit, s (default: generous)")
+    ap.add_argument("--max-error", type=float, default=2000.0,
+                    help="largest median position error over the second half of the run, m (default 2000)")
     ap.add_argument("--keep-log", action="store_true",
                     help="keep the estimator's log file (it is kept anyway when the soak fails)")
     ap.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -539,6 +543,8 @@ def _summarise(args, sim, ledger: Ledger, listener: Listener, alive: bool, exit_
                  and masked == ledger.expected_masked)
     seen = accepted + int(v.get("measurements rejected", 0)) if v else -1
     errors = listener.errors()
+    late = errors[errors.size // 2:]
+    late_median = float(np.median(late)) if late.size else math.nan
     non_finite = sum(listener.non_finite.values())
     log_problems = [line for line in log_text.splitlines() if "Traceback" in line or "internal_error" in line
                     or "[ERROR]" in line or "[FATAL]" in line]
@@ -550,6 +556,7 @@ def _summarise(args, sim, ledger: Ledger, listener: Listener, alive: bool, exit_
         "no internal_error or filter_error": counted["internal_error"] == 0 and counted["filter_error"] == 0,
         "no non-finite output": non_finite == 0 and listener.counts["odometry/filtered"] > 0,
         "no ERROR, FATAL or traceback in the estimator log": not log_problems,
+        f"estimate follows truth (second-half median error <= {args.max_error:g} m)": late_median <= args.max_error,
     }
     growth = None
     if rss_start.get("VmRSS") and rss_end.get("VmRSS"):
@@ -608,6 +615,7 @@ def _summarise(args, sim, ledger: Ledger, listener: Listener, alive: bool, exit_
         "position_error_m": {"median": _round(float(np.median(errors))) if errors.size else None,
                              "p95": _round(float(np.percentile(errors, 95))) if errors.size else None,
                              "final": _round(float(errors[-1])) if errors.size else None,
+                             "second_half_median": _round(late_median),
                              "compared": int(errors.size)},
         "estimator_log_problems": log_problems[:10],
     }
@@ -674,8 +682,8 @@ def format_summary(s: dict) -> str:
     L.append("  outputs checked: " + ", ".join(f"{k} {n}" for k, n in sorted(s["outputs_checked"].items()))
              + f"; non-finite: {sum(s['non_finite_outputs'].values())}")
     e = s["position_error_m"]
-    L.append(f"  position error vs truth: median {e['median']} m, p95 {e['p95']} m, final {e['final']} m "
-             f"({e['compared']} estimates)")
+    L.append(f"  position error vs truth: median {e['median']} m, p95 {e['p95']} m, final {e['final']} m, "
+             f"second-half median {e['second_half_median']} m ({e['compared']} estimates)")
     L.append("  diagnostics levels: " + ", ".join(f"{k} {n}" for k, n in s["diagnostics_levels"].items())
              + ("; causes: " + ", ".join(f"{k} {n}" for k, n in s["diagnostics_causes"].items())
                 if s["diagnostics_causes"] else ""))
