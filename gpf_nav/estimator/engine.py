@@ -18,6 +18,9 @@ of ROS time. Rules:
   stamps within it but before the filter's (re-)initialisation (``stale_stamp``); more than ``max_future`` s ahead of the
   node clock too (``future_stamp``). With ``history_length`` 0 every stamp before the filter's time is
   ``stale_stamp``.
+* An IMU sample delivered after a measurement stamped after it (the topics arrive in any order) that
+  should have been that measurement's input re-applies the history from there in the same way
+  (``late_imu_count``), so the estimate does not depend on the order of the two topics.
 * Initialisation, first match wins: the ``initial_state`` parameter (at ``initial_stamp``, or at the
   first measurement when that is negative); a ``set_state`` (full state) or ``set_pose`` (position)
   message; else the first ``init_window`` measurements through
@@ -194,6 +197,7 @@ class EstimatorEngine:
         self.history = History(int(round(self.config.history_length * NS)))
         self._streaks: dict[str, int] = {}   # gate refusals in a row per stream
         self.late_count = 0                   # late measurements fused at their stamp
+        self.late_imu_count = 0               # IMU samples that came after a measurement that needed them
         self.replayed_count = 0               # inputs re-applied after them
         self.snapshot_failures = 0            # filter copies that failed (the history was emptied)
         self._init_buffer: list[tuple[int, np.ndarray]] = []
@@ -299,11 +303,7 @@ class EstimatorEngine:
         before it, re-apply the inputs between, then the late one, then the inputs stamped after it
         (their counters are not counted again; the monitor is not fed again)."""
         i, j = self.history.split(stamp_ns)
-        redo = self.history.take(j)
-        first = redo[0]
-        self.filter, self.t_ns, self._streaks = first.before, first.before_ns, dict(first.streaks)
-        self._core_recoveries = self.filter.recoveries
-        self._shadow = None
+        redo = self._rewind(j)
         for entry in redo[:i - j]:
             self._update(entry.t_ns, entry.y, entry.stream, entry.sensor, feed_monitor=False)
         reason = self._update(stamp_ns, y, stream, sensor)
@@ -428,9 +428,36 @@ class EstimatorEngine:
         if not ok:
             self.counters.reject("imu", reason)
             return False, reason
-        self._imu.append((stamp_ns, np.asarray(specific_force_world, dtype=float).copy()))
+        u = np.asarray(specific_force_world, dtype=float).copy()
+        self._imu.append((stamp_ns, u))
         self.counters.accept("imu")
+        if self.initialized and stamp_ns < self.t_ns:
+            self._late_imu(stamp_ns, u)
         return True, ""
+
+    def _late_imu(self, stamp_ns: int, u: np.ndarray) -> None:
+        """An IMU sample that arrives after a measurement stamped after it (another topic, delivered
+        first): when it is the input that measurement's prediction should have held, re-apply the history
+        from it, as for a late measurement, so the estimate is that of delivery in stamp order. Beyond the
+        history, or when a later sample already held, nothing changes."""
+        split = self.history.split(stamp_ns)
+        if split is None or self._input_at(self.history.entries[split[0]].t_ns) is not u:
+            return
+        redo = self._rewind(split[1])
+        for entry in redo:
+            self._update(entry.t_ns, entry.y, entry.stream, entry.sensor, feed_monitor=False)
+        self.late_imu_count += 1
+        self.replayed_count += len(redo)
+
+    def _rewind(self, j: int) -> list:
+        """Take the history's inputs from index ``j`` on and restore the filter they were applied to (the
+        snapshot kept with input ``j``); returns them, to be re-applied."""
+        redo = self.history.take(j)
+        first = redo[0]
+        self.filter, self.t_ns, self._streaks = first.before, first.before_ns, dict(first.streaks)
+        self._core_recoveries = self.filter.recoveries
+        self._shadow = None
+        return redo
 
     def set_state(self, stamp_ns: int, mean: np.ndarray, cov: np.ndarray, now_ns: int | None) -> tuple[bool, str]:
         """(Re-)initialise at ``stamp_ns`` with a full state ``mean`` ``(n,)`` and covariance ``cov``

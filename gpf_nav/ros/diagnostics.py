@@ -195,6 +195,7 @@ def stream_values(engine) -> list[tuple[str, str]]:
     if history is not None:
         span = (history.entries[-1].t_ns - history.entries[0].t_ns) * 1e-9 if len(history) else 0.0
         values += [("late measurements fused", str(engine.late_count)),
+                   ("late IMU samples applied", str(engine.late_imu_count)),
                    ("inputs re-applied", str(engine.replayed_count)),
                    ("history inputs", str(len(history))), ("history span [s]", _fmt(span)),
                    ("history snapshot failures", str(engine.snapshot_failures))]
