@@ -48,8 +48,10 @@ MOVE_LIMIT = 100.0
 particle. A direction they barely see (a singular value just above :data:`RANK_TOLERANCE`) turns a
 curvature of a fraction of the noise into a move far beyond the cloud, and the map back then runs away
 instead of converging (an angles-only update of the compensated GPF moved particles 9e4 cloud deviations
-and published a position sigma of 2e11 m). Such directions are dropped like those below the tolerance;
-on the lunar descent's campaigns the largest move is about 13 deviations (range only)."""
+and published a position sigma of 2e11 m). Such directions are dropped like those below the tolerance.
+On the lunar descent's honesty conditions (6 runs each) the moves kept reach 16 deviations (large prior,
+range only); with range only and the 9 % mismatch 421 of 14 400 flattenings drop a direction (moves up
+to 1e7 deviations)."""
 _NONE = np.zeros((0, 0))
 """No previous curvature (:func:`~gpf_nav.kernels.curvature.largest_scaled`)."""
 
@@ -165,7 +167,7 @@ def flattening(x: np.ndarray, weights: np.ndarray, rows: np.ndarray, sensor: Sen
         runaway = _runaway(Vt[keep], moves[:user_dim], x[:user_dim], mean[:user_dim], weights)
         if runaway.any():
             keep[np.flatnonzero(keep)[runaway]] = False
-            ahead_gain.write(gain, keep)
+            ahead_gain.write(gain, keep)  # (the gain ``flat`` holds, rewritten in place)
             moves = gain @ nu.T
     return flat, x + moves
 
