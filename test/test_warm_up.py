@@ -72,7 +72,7 @@ def test_the_warm_up_leaves_the_engine_untouched(name):
     model = filter_model(ScenarioConfig())
     engine = EstimatorEngine(lambda: make_filter(name, model, n_particles=100, seed=1), model, EngineConfig())
     seconds, error = warm_up(engine, initial_state(ScenarioConfig()))
-    assert error == "" and seconds > 0.0
+    assert error == ""
     assert not engine.initialized and engine.counters.total_rejected == 0 and not engine.counters.accepted
 
 
