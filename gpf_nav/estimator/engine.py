@@ -439,7 +439,8 @@ class EstimatorEngine:
         """An IMU sample that arrives after a measurement stamped after it (another topic, delivered
         first): when it is the input that measurement's prediction should have held, re-apply the history
         from it, as for a late measurement, so the estimate is that of delivery in stamp order. Beyond the
-        history, or when a later sample already held, nothing changes."""
+        history, or too old to be that input (``imu_timeout``), nothing changes. (An earlier sample than the
+        newest one is ``stale_stamp`` in :meth:`imu`.)"""
         split = self.history.split(stamp_ns)
         if split is None or self._input_at(self.history.entries[split[0]].t_ns) is not u:
             return
@@ -449,7 +450,7 @@ class EstimatorEngine:
         self.late_imu_count += 1
         self.replayed_count += len(redo)
 
-    def _rewind(self, j: int) -> list:
+    def _rewind(self, j: int) -> list[Entry]:
         """Take the history's inputs from index ``j`` on and restore the filter they were applied to (the
         snapshot kept with input ``j``); returns them, to be re-applied."""
         redo = self.history.take(j)
