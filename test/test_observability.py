@@ -17,7 +17,7 @@ from gpf_nav.estimator.factory import FILTERS, make_filter
 from gpf_nav.filters import ExtendedKF, GeometricProjectionPF
 from gpf_nav.integrity import ConsistencyMonitor, ObservabilityTracker, innovation_moments
 from gpf_nav.models import LinearGaussianModel
-from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate, undetermined_subspace
+from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate, initial_state, undetermined_subspace
 from gpf_nav.sensors.model import ModelSensor
 from linear_reference import kalman, simulate
 
@@ -299,3 +299,79 @@ def test_the_estimator_diagnostics_warn_when_the_innovations_outgrow_the_covaria
 
     engine, level, message, values = run(np.array([1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3]), consistency=None)
     assert dict(values)["consistency level"] == "disabled" and "consistency" not in message
+
+
+def _rebuilt_one_call_at_a_time(tracker: ObservabilityTracker) -> tuple[np.ndarray, np.ndarray]:
+    """The oracle of the batched rebuild: the reference carried back one transition at a time, then every
+    Jacobian and recursion of the log in turn (how the tracker rebuilt before ``transition_chain``,
+    ``transition_jacobian_along``, ``jacobian_along`` and the replay kernel)."""
+    from gpf_nav.kernels import information
+    log, model = tracker._log, tracker.model
+    points = [tracker.reference[None]]
+    for dt, t, u in reversed(log.predictions):
+        points.append(model.transition(points[-1], -dt, t + dt, u))
+    points.reverse()
+    free, data, step = tracker._prior, tracker._prior.copy(), 0
+    for entry in log.entries:
+        x = points[step]
+        if entry[0] is None:
+            _, dt, t, u = entry
+            F = np.ascontiguousarray(model.transition_jacobian(x, dt, t, u)[0])
+            step += 1
+            _, free, data = information.propagate(F, np.array(model.process_noise(dt, t)),
+                                                  np.ascontiguousarray(points[step][0]), free, data)
+        else:
+            sensor, rows, t = entry
+            H, R = sensor.jacobian(x, t)[0][rows], sensor.noise(t)[np.ix_(rows, rows)]
+            outcome, updated = information.update(np.ascontiguousarray(H), np.ascontiguousarray(R), np.zeros(0),
+                                                  free, data, 0.0)
+            data = updated if outcome == information.UPDATED else data
+    return free, data
+
+
+@pytest.mark.parametrize("kind", ["lunar", "compensated lunar", "user model"])
+def test_the_rebuild_gives_the_numbers_of_its_calls_one_at_a_time(kind):
+    """A reanchoring's rebuild, batched (the reference carried back in one call, the Jacobians along the
+    trajectory in one call per model and sensor, the recursions in one kernel), equals the calls one at a
+    time bit for bit: with IMU inputs on some predictions and none on others, two step lengths, updates
+    with the azimuth masked, and a second sensor; a user model through the default (one call per state)."""
+    from gpf_nav.models.compensation import ModelErrorCompensation
+    from gpf_nav.sensors.kinematic import AltitudeSensor
+    from gpf_nav.sensors.sensor import Padded
+    rng = np.random.default_rng(5)
+    if kind == "user model":
+        model, sensors = hidden_constant_model(measure_z=True), []
+        mean, cov = PRIOR_MEAN, PRIOR_COV
+    else:
+        config = ScenarioConfig(epsilon=0.0)
+        model = filter_model(config)
+        mean, cov = initial_state(config), np.diag([1e6, 1e6, 1e6, 1.0, 1.0, 1.0])
+        sensors = [AltitudeSensor(30.0)]
+        if kind == "compensated lunar":
+            model = ModelErrorCompensation(model)
+            mean, cov = np.r_[mean, 1e-5, 0.0, -1e-5], np.diag(np.r_[np.diag(cov), 1e-8, 1e-8, 1e-8])
+            sensors = [Padded(sensors[0], 6, 9)]
+    sensors.insert(0, ModelSensor(model))
+    tracker = ObservabilityTracker(model)
+    tracker.reset(mean, cov)
+    t = 0.0
+    for k in range(60):
+        dt = 2.0 if k % 3 else 0.5
+        u = None if kind == "user model" or k % 2 else rng.normal(size=3) * 0.05
+        tracker.predict(dt, t, u)
+        t += dt
+        for j, sensor in enumerate(sensors):
+            if j and k % 4:
+                continue
+            rows = np.ones(sensor.dim, bool)
+            if kind != "user model" and j == 0 and k % 5 == 1:
+                rows[1] = False  # no azimuth
+            tracker.update(sensor, sensor.measure(tracker.reference[None], t)[0], rows, t, tracker.reference)
+    before = tracker._data.copy()
+    moved = tracker.reference * (1.0 + 1e-3 * rng.standard_normal(tracker.reference.size))
+    tracker.reanchor(moved)
+    free, data = _rebuilt_one_call_at_a_time(tracker)
+    assert tracker.reanchors == 1 and len(tracker._log.entries) > 100
+    if kind != "user model":  # (a linear model's Jacobians do not depend on the reference)
+        assert not np.array_equal(tracker._data, before)  # the rebuild moved the recursions
+    assert np.array_equal(tracker._free, free) and np.array_equal(tracker._data, data)

@@ -1,6 +1,6 @@
 """The estimator's warm-up (:mod:`gpf_nav.estimator.warm_up`): run in a fresh process before any message,
-it loads every compiled kernel the first minutes of the Section 7 descent then call, and it leaves the
-node's own engine untouched."""
+it loads every compiled kernel the first minutes of the Section 7 descent and a reanchoring of the
+observability trackers then call, and it leaves the node's own engine untouched."""
 import subprocess
 import sys
 import textwrap
@@ -48,6 +48,14 @@ _FRESH_PROCESS = textwrap.dedent("""
         elif event.kind == "measurement":
             accepted += layer.engine.measurement(event.t_ns, list(event.data), None)[0]
             layer.engine.extrapolate(event.t_ns + 100_000_000)
+    # a reanchoring, minutes in: every tracker of the filter and its members rebuilt
+    stack = [layer.engine.filter]
+    while stack:
+        flt = stack.pop()
+        stack += [*getattr(flt, "members", ()), *[f for f in [getattr(flt, "filter", None)] if f is not None]]
+        tracker = getattr(flt, "_observability", None)
+        if tracker is not None and tracker.ready:
+            tracker.reanchor(flt.mean)
     print(json.dumps(dict(ok=ok, line=line, before=before, warmed=warmed, after=signatures(),
                           accepted=accepted, initialized=layer.engine.initialized)))
 """)

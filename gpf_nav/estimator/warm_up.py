@@ -6,11 +6,14 @@ measurement, that wait stalls the node while its inputs pile up: on simulated ti
 lags the stamps, valid IMU samples are refused as ``future_stamp`` and the filter predicts through a burn
 without them. :func:`warm_up` pays the wait before the node subscribes: a throwaway engine with the same
 factory, model and configuration takes a short noise-free trajectory of the model's own measurement,
-with IMU samples, through its initialisation and a few updates. The engine the node runs is untouched.
+with IMU samples, through its initialisation and a few updates, then rebuilds its observability trackers as
+a reanchoring does minutes into a flight (a short noise-free run never reanchors). The engine the node
+runs is untouched.
 """
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -29,7 +32,8 @@ SPECIFIC_FORCE = np.array([0.0, 0.0, 0.5])
 def warm_up(engine: EstimatorEngine, state: np.ndarray) -> tuple[float, str]:
     """Run a throwaway engine built like ``engine`` on the model's noise-free measurements of ``state``
     ``(n,)`` flowed by the model, ``init_window`` plus :data:`UPDATES` of them :data:`PERIOD` s apart, each
-    after :data:`IMU_PER_PERIOD` IMU samples, with a prediction between them.
+    after :data:`IMU_PER_PERIOD` IMU samples, with a prediction between them; then rebuild every observability
+    tracker of its filter along its own reference.
 
     Returns the wall seconds it took and ``""``, or the error that stopped it (never raises: a failed
     warm-up only means the first message waits for the kernels instead).
@@ -53,6 +57,18 @@ def warm_up(engine: EstimatorEngine, state: np.ndarray) -> tuple[float, str]:
         if updates < UPDATES or rehearsal.reinit_count or not np.isfinite(rehearsal.mean).all():
             raise RuntimeError(f"{updates} updates, {rehearsal.reinit_count} re-initialisations, mean "
                                f"{rehearsal.mean}: the throwaway filter did not run as the node's would")
+        for flt in _filters(rehearsal.filter):
+            tracker = getattr(flt, "_observability", None)
+            if tracker is not None and tracker.ready:
+                tracker.reanchor(tracker.reference)
     except Exception as err:  # noqa: BLE001 - reported, never fatal
         return time.perf_counter() - start, f"{type(err).__name__}: {err}"
     return time.perf_counter() - start, ""
+
+
+def _filters(flt) -> Iterator:
+    """``flt`` and the filters it runs: a multiple-model filter's members, a bias filter's inner filter."""
+    yield flt
+    for inner in (*getattr(flt, "members", ()), getattr(flt, "filter", None)):
+        if inner is not None:
+            yield from _filters(inner)

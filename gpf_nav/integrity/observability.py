@@ -142,6 +142,11 @@ class ObservabilityTracker:
         """Whether :meth:`reset` has been called."""
         return self._free is not None
 
+    @property
+    def reference(self) -> np.ndarray | None:
+        """``(n,)`` the state the recursions are linearised at now (None before :meth:`reset`)."""
+        return None if self._reference is None else self._reference.copy()
+
     def reanchor(self, mean: np.ndarray) -> None:
         """Move the reference to ``mean`` ``(n,)`` (the filter's) and rebuild both recursions along the
         model's trajectory through it (:meth:`_rebuild`); when that cannot be done (a log past
@@ -155,39 +160,74 @@ class ObservabilityTracker:
 
     def _rebuild(self) -> None:
         """Both recursions again from the prior, linearised along the model's trajectory that reaches the
-        reference now: carried back through the logged predictions, then forward through the log."""
+        reference now: carried back through the logged predictions, then forward through the log, the
+        Jacobians along it in one call each (:meth:`~gpf_nav.models.state_space.StateSpaceModel.transition_jacobian_along`,
+        :meth:`~gpf_nav.sensors.sensor.Sensor.jacobian_along` per sensor) and the recursions in one kernel
+        (:func:`~gpf_nav.kernels.information.replay`)."""
         log = self._log
         if log is None or log.full:
             return
+        predictions = log.predictions
+        dt = np.array([p[0] for p in predictions], dtype=float)
+        t = np.array([p[1] for p in predictions], dtype=float)
+        u = [p[2] for p in predictions]
         with np.errstate(all="ignore"):
-            try:
-                points = [self._reference[None]]
-                for dt, t, u in reversed(log.predictions):
-                    points.append(self.model.transition(points[-1], -dt, t + dt, u))
+            try:  # (K + 1, n): the state before each prediction, then the reference
+                trajectory = self.model.transition_chain(self._reference, -dt[::-1], (t + dt)[::-1], u[::-1])[::-1]
             except (ValueError, FloatingPointError, ArithmeticError):
                 return
-        points.reverse()
-        if not np.isfinite(np.concatenate(points)).all():
+        if not np.isfinite(trajectory).all():
             return
-        free, data, step = self._prior, self._prior.copy(), 0
-        for entry in log.entries:
-            x = points[step]
-            if entry[0] is None:  # a prediction
-                _, dt, t, u = entry
-                F = _matrix(self.model.transition_jacobian(x, dt, t, u)[0])
-                step += 1
-                ok, free, data = information.propagate(F, _matrix(self._process_noise(dt, t)),
-                                                       _matrix(points[step][0]), free, data)
-            else:
-                sensor, rows, t = entry
-                H, R = sensor.jacobian(x, t)[0], sensor.noise(t)
-                if not rows.all():
-                    H, R = H[rows], R[np.ix_(rows, rows)]
-                H, R = _matrix(H), _matrix(R)
-                outcome, updated = information.update(H, R, _EMPTY, free, data, 0.0)
-                if outcome == information.UPDATED:
-                    data = updated
-        self._free, self._data = free, data
+        n = trajectory.shape[1]
+        predicted = np.array([entry[0] is None for entry in log.entries], dtype=bool)
+        at = np.cumsum(predicted) - predicted  # the trajectory's point each entry is linearised at
+        F = self.model.transition_jacobian_along(trajectory[:-1], dt, t, u) if u else np.zeros((0, n, n))
+        Q = self._noise_along(dt, t, n)
+        H, R, rows = self._logged_updates(trajectory[at[~predicted]],
+                                          [entry for entry in log.entries if entry[0] is not None], n)
+        self._free, self._data = information.replay(_matrix(self._prior), predicted, _matrix(F), _matrix(Q),
+                                                    _matrix(trajectory[1:]), H, R, rows)
+
+    def _noise_along(self, dt: np.ndarray, t: np.ndarray, n: int) -> np.ndarray:
+        """``Q`` ``(K, n, n)`` of each logged prediction (once per distinct ``dt`` when it does not depend on
+        ``t``)."""
+        if self.model.time_varying_noise:
+            return np.array([self.model.process_noise(step, start) for step, start in zip(dt.tolist(), t.tolist())],
+                            dtype=float).reshape(-1, n, n)
+        distinct, index = np.unique(dt, return_inverse=True)
+        return np.array([self.model.process_noise(step, 0.0) for step in distinct.tolist()],
+                        dtype=float).reshape(-1, n, n)[index.ravel()]
+
+    @staticmethod
+    def _logged_updates(x: np.ndarray, updates: list, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The measured rows' Jacobians at ``x`` ``(M, n)`` and noises of the logged ``updates`` (``(sensor,
+        rows, t)``), padded to the largest: ``H`` ``(M, r, n)``, ``R`` ``(M, r, r)`` and the rows used
+        ``(M,)``; each sensor's Jacobians in one call."""
+        by_sensor: dict[int, list[int]] = {}
+        for j, (sensor, _, _) in enumerate(updates):
+            by_sensor.setdefault(id(sensor), []).append(j)
+        groups = []
+        for members in by_sensor.values():
+            sensor = updates[members[0]][0]
+            masks = np.array([updates[j][1] for j in members], dtype=bool)  # (G, m)
+            times = np.array([updates[j][2] for j in members], dtype=float)
+            groups.append((sensor, np.array(members), masks, times))
+        count = np.zeros(len(updates), dtype=np.int64)
+        for _, members, masks, _ in groups:
+            count[members] = masks.sum(axis=1)
+        width = int(count.max()) if count.size else 0
+        H, R = np.zeros((len(updates), width, n)), np.zeros((len(updates), width, width))
+        for sensor, members, masks, times in groups:
+            jacobians = sensor.jacobian_along(x[members], times)  # (G, m, n)
+            noises = np.array([sensor.noise(t) for t in times.tolist()], dtype=float).reshape(len(members),
+                                                                                             *masks.shape[1:] * 2)
+            patterns, which = np.unique(masks, axis=0, return_inverse=True)
+            for pattern, rows in enumerate(patterns):  # the updates that measured the same rows, together
+                index, measured = np.flatnonzero(which.ravel() == pattern), np.flatnonzero(rows)
+                c = measured.size
+                H[members[index], :c] = jacobians[index][:, measured]
+                R[members[index], :c, :c] = noises[index][:, measured][:, :, measured]
+        return H, R, count
 
     def predict(self, dt: float, t: float, u=None) -> None:
         """Carry both recursions and the reference over ``dt`` from time ``t``

@@ -189,6 +189,32 @@ def update(H: np.ndarray, R: np.ndarray, r: np.ndarray, free: np.ndarray, data: 
 
 
 @njit(cache=True, error_model="numpy")
+def replay(prior: np.ndarray, predicted: np.ndarray, F: np.ndarray, Q: np.ndarray, reference: np.ndarray,
+           H: np.ndarray, R: np.ndarray, rows: np.ndarray):
+    """Both recursions from ``prior`` ``(n, n)`` through a log of ``E`` entries in order: ``(free, data)``.
+
+    Entry ``e`` is a prediction when ``predicted[e]`` (``(E,)`` bool), taking the next of ``F``, ``Q``
+    ``(K, n, n)`` and the new ``reference`` ``(K, n)`` (:func:`propagate`, skipped when it refuses), or an
+    update, taking the next of ``H`` ``(M, r, n)`` and ``R`` ``(M, r, r)``, of which its first ``rows[j]``
+    are used (:func:`update` with no residual; skipped where ``S`` is singular): the calls the tracker made
+    one at a time, in one loop."""
+    free, data = prior, prior.copy()
+    k = j = 0
+    empty = np.zeros(0)
+    for e in range(predicted.size):
+        if predicted[e]:
+            ok, free, data = propagate(F[k], Q[k], reference[k], free, data)
+            k += 1
+        else:
+            m = rows[j]
+            outcome, updated = update(H[j, :m].copy(), R[j, :m, :m].copy(), empty, free, data, 0.0)
+            if outcome == UPDATED:
+                data = updated
+            j += 1
+    return free, data
+
+
+@njit(cache=True, error_model="numpy")
 def _cholesky(S: np.ndarray):
     """``(ok, lower factor)``; ``ok`` False where LAPACK's ``potrf`` fails (a pivot not positive, or NaN)."""
     n = S.shape[0]

@@ -172,6 +172,50 @@ def _pushed_leapfrog_parallel(x, a, gm, h, steps, u, driven, integrated, velocit
                                block * CHUNK, np.empty((12, CHUNK)), np.empty((4, CHUNK)), out)
 
 
+@njit(cache=True, error_model="numpy")
+def leapfrog_chain(x: np.ndarray, gm: float, h: np.ndarray, steps: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """``(6, K + 1)``: the state ``x`` ``(6,)`` and after each of ``K`` :func:`leapfrog` calls in turn, the
+    ``k``-th of ``steps[k]`` sub-steps ``h[k]`` with the input ``u[:, k]`` (``u`` ``(3, K)``): the same numbers
+    as the ``K`` calls, in one."""
+    out = np.empty((6, h.size + 1))
+    state, moved, force, buffer = np.empty((6, 1)), np.empty((6, 1)), np.empty((3, 1)), np.empty((12, 1))
+    state[:, 0] = x
+    out[:, 0] = x
+    for k in range(h.size):
+        force[:, 0] = u[:, k]
+        _leapfrog_block(state, gm, h[k], steps[k], force, 0, buffer, moved)
+        state[:, 0] = moved[:, 0]
+        out[:, k + 1] = moved[:, 0]
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def pushed_leapfrog_chain(x: np.ndarray, a: np.ndarray, gm: float, h: np.ndarray, steps: np.ndarray,
+                          u: np.ndarray, driven: np.ndarray, integrated: np.ndarray, velocity_gain: np.ndarray,
+                          position_gain: np.ndarray, decay: np.ndarray) -> np.ndarray:
+    """``(9, K + 1)``: the state ``x`` ``(6,)`` with the acceleration ``a`` ``(3,)``, and after each of ``K``
+    compensated transitions in turn: :func:`pushed_leapfrog` with the ``k``-th entries of ``h``, ``steps``,
+    ``u`` ``(3, K)``, ``velocity_gain`` and ``position_gain``, then ``a`` times ``decay[k]`` (the same
+    numbers as the ``K`` calls, in one)."""
+    out = np.empty((9, h.size + 1))
+    state, moved, acceleration = np.empty((6, 1)), np.empty((6, 1)), np.empty((3, 1))
+    force, buffer, pushed = np.empty((3, 1)), np.empty((12, 1)), np.empty((4, 1))
+    state[:, 0] = x
+    acceleration[:, 0] = a
+    out[:6, 0] = x
+    out[6:, 0] = a
+    for k in range(h.size):
+        force[:, 0] = u[:, k]
+        _pushed_leapfrog_block(state, acceleration, gm, h[k], steps[k], force, driven, integrated,
+                               velocity_gain[k], position_gain[k], 0, buffer, pushed, moved)
+        for i in range(3):
+            acceleration[i, 0] = acceleration[i, 0] * decay[k]
+        state[:, 0] = moved[:, 0]
+        out[:6, k + 1] = moved[:, 0]
+        out[6:, k + 1] = acceleration[:, 0]
+    return out
+
+
 def pushed_leapfrog(x: np.ndarray, a: np.ndarray, gm: float, h: float, steps: int, u: np.ndarray,
                     driven: np.ndarray, integrated: np.ndarray, velocity_gain: float, position_gain: float,
                     out: np.ndarray) -> None:

@@ -154,18 +154,46 @@ class ModelErrorCompensation(StateSpaceModel):
         np.multiply(a, decay, out=out[self._n:])
         return out.T
 
+    def transition_chain(self, x, dt, t, u):
+        """In one call where the base model has the fused path (:meth:`StateSpaceModel.pushed_transition_chain`),
+        else :meth:`transition` in turn."""
+        if self._framed:
+            distinct, index = np.unique(dt, return_inverse=True)
+            couplings = [self._coupling(step) for step in distinct.tolist()]
+            gains = np.array([(G[self.acceleration_of[0], 0],
+                               0.0 if self._integrated_into is None else G[self._integrated_into[0], 0], decay)
+                              for G, decay in couplings]).reshape(-1, 3)[index.ravel()].T  # (3, K)
+            chain = self.base.pushed_transition_chain(x[:self._n], x[self._n:], dt, t, u, gains[0], gains[1],
+                                                      gains[2], self.acceleration_of, self._integrated_rows)
+            if chain is not None:
+                return chain
+        return super().transition_chain(x, dt, t, u)
+
     def transition_jacobian(self, x, dt, t=0.0, u=None):
+        return self._jacobian(x, self.base.transition_jacobian(x[:, :self._n], dt, t, u), ((dt, slice(None)),))
+
+    def transition_jacobian_along(self, x, dt, t, u):
+        """The base model's Jacobians along the trajectory (:meth:`StateSpaceModel.transition_jacobian_along`),
+        the frames and their derivatives in one call each, the coupling once per distinct step ``dt``."""
+        base = self.base.transition_jacobian_along(x[:, :self._n], dt, t, u)
+        return self._jacobian(x, base, tuple((step, np.flatnonzero(dt == step)) for step in np.unique(dt).tolist()))
+
+    def _jacobian(self, x: np.ndarray, base: np.ndarray, steps: tuple) -> np.ndarray:
+        """Jacobians ``(N, n + p, n + p)`` at ``x`` ``(N, n + p)`` from the base model's ``(N, n, n)``, with the
+        coupling of the step ``dt`` for the particles ``index`` of each ``(dt, index)`` of ``steps``."""
         xb, a = self._split(x)
-        G, decay = self._coupling(dt)
         J = np.zeros((x.shape[0], self.state_dim, self.state_dim))
-        J[:, :self._n, :self._n] = self.base.transition_jacobian(xb, dt, t, u)
+        J[:, :self._n, :self._n] = base
         frame = self._frame(xb.T)
-        if frame is None:
-            J[:, :self._n, self._n:] = G
-        else:
-            J[:, :self._n, self._n:] = np.einsum("ij,jkn->nik", G, frame)
-            J[:, :self._n, :self._n] += np.einsum("ij,njl->nil", G, self._push_derivative(xb, a))
-        J[:, self._n:, self._n:] = decay * np.eye(self._p)
+        derivative = None if frame is None else self._push_derivative(xb, a)
+        for dt, index in steps:
+            G, decay = self._coupling(dt)
+            if frame is None:
+                J[index, :self._n, self._n:] = G
+            else:  # (G has one non-zero per row: each sum is a single product, in any order)
+                J[index, :self._n, self._n:] = np.einsum("ij,jkn->nik", G, frame[..., index])
+                J[index, :self._n, :self._n] += np.einsum("ij,njl->nil", G, derivative[index])
+            J[index, self._n:, self._n:] = decay * np.eye(self._p)
         return J
 
     def _frame(self, x: np.ndarray) -> np.ndarray | None:
@@ -241,6 +269,9 @@ class ModelErrorCompensation(StateSpaceModel):
     def measure_and_jacobian(self, x, t=0.0):
         h, H = self.base.measure_and_jacobian(x[:, :self._n], t)
         return h, self._pad(H)
+
+    def measurement_jacobian_along(self, x, t):
+        return self._pad(self.base.measurement_jacobian_along(x[:, :self._n], t))
 
     def _pad(self, H: np.ndarray) -> np.ndarray:
         """Base Jacobian ``(N, m, n)`` with zero columns for ``a``: ``(N, m, n+p)``."""

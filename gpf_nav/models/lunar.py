@@ -105,6 +105,39 @@ class LunarDescentModel(StateSpaceModel):
         steps = self._substeps(dt)
         return orbit.leapfrog_jacobian(_particle_last(x), self.gm, dt / steps, steps, _input_columns(u))
 
+    def transition_chain(self, x, dt, t, u):
+        """:meth:`transition` ``K`` times in turn in one kernel call (:func:`gpf_nav.kernels.orbit.leapfrog_chain`;
+        the flow does not depend on ``t``)."""
+        steps, h = self._chain_steps(dt)
+        return orbit.leapfrog_chain(np.asarray(x, dtype=float), self.gm, h, steps, _input_matrix(u)).T
+
+    def pushed_transition_chain(self, x, a, dt, t, u, velocity_gain, position_gain, decay, driven, integrated):
+        """The compensated transition ``K`` times in turn in one kernel call
+        (:func:`gpf_nav.kernels.orbit.pushed_leapfrog_chain`)."""
+        steps, h = self._chain_steps(dt)
+        return orbit.pushed_leapfrog_chain(np.asarray(x, dtype=float), np.asarray(a, dtype=float), self.gm, h,
+                                           steps, _input_matrix(u), driven, integrated,
+                                           np.asarray(velocity_gain, dtype=float),
+                                           np.asarray(position_gain, dtype=float), np.asarray(decay, dtype=float)).T
+
+    def _chain_steps(self, dt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The sub-steps ``(K,)`` of each of the steps ``dt`` ``(K,)`` and their length ``(K,)``, s."""
+        distinct, index = np.unique(dt, return_inverse=True)
+        steps = np.array([self._substeps(step) for step in distinct.tolist()], dtype=np.int64)[index.ravel()]
+        return steps, dt / steps
+
+    def transition_jacobian_along(self, x, dt, t, u):
+        """:meth:`transition_jacobian` at each state of ``x`` ``(K, 6)`` in one kernel call per distinct step
+        ``dt`` (the sub-steps follow it), each with its own input (the flow does not depend on ``t``)."""
+        out = np.empty((len(dt), 6, 6))
+        inputs = _input_matrix(u)
+        for step in np.unique(dt).tolist():
+            index = np.flatnonzero(dt == step)
+            steps = self._substeps(step)
+            out[index] = orbit.leapfrog_jacobian(_particle_last(x[index]), self.gm, step / steps, steps,
+                                                 np.ascontiguousarray(inputs[:, index]))
+        return out
+
     def compensation_frame(self, x):
         """Radial, along-track and cross-track axes ``(N, 3, 3)`` (columns) of the osculating orbit at
         ``x`` ``(N, 6)``: the frame of orbit determination's empirical accelerations, in which gravity-field
@@ -156,6 +189,11 @@ class LunarDescentModel(StateSpaceModel):
             return self._point_jacobian(x[0])
         return self._jacobian(*self._line_of_sight(x))
 
+    def measurement_jacobian_along(self, x, t):
+        """:meth:`measurement_jacobian` at every state of ``x`` ``(K, 6)`` in one call (``h`` does not depend
+        on ``t``)."""
+        return self.measurement_jacobian(x)
+
     def measure_and_jacobian(self, x):
         if x.shape[0] == 1:  # one point (the observability tracker's reference): the point Jacobian
             return self.measure(x), self._point_jacobian(x[0])
@@ -204,6 +242,16 @@ def _as_input(u):
         return None
     u = np.asarray(u, dtype=float)
     return None if not np.any(u) else u
+
+
+def _input_matrix(u: list) -> np.ndarray:
+    """``(3, K)``: the inputs ``u`` (``K`` specific forces ``(3,)`` or None) side by side, a zero column for
+    None (what no input gives the kernels)."""
+    inputs = np.zeros((3, len(u)))
+    for k, force in enumerate(u):
+        if force is not None:
+            inputs[:, k] = force
+    return inputs
 
 
 def _particle_last(x: np.ndarray) -> np.ndarray:

@@ -119,6 +119,28 @@ class StateSpaceModel(ABC):
                             u: np.ndarray | None = None) -> np.ndarray:
         """Jacobian of :meth:`transition` with respect to ``x``: ``(N, n) -> (N, n, n)``."""
 
+    def transition_chain(self, x: np.ndarray, dt: np.ndarray, t: np.ndarray, u: list) -> np.ndarray:
+        """``(K + 1, n)``: the state ``x`` ``(n,)`` and after each of ``K`` :meth:`transition` calls in turn, the
+        ``k``-th over ``dt[k]`` from ``t[k]`` (``(K,)`` each) with the input ``u[k]`` (None: none): how the
+        observability tracker carries its reference back. The default makes the calls; a model overrides it
+        to make them in one, with the same numbers."""
+        out = np.empty((len(dt) + 1, x.size))
+        out[0] = x
+        for k, (step, start, inputs) in enumerate(zip(dt, t, u)):
+            out[k + 1] = self.transition(out[k:k + 1], float(step), float(start), inputs)[0]
+        return out
+
+    def transition_jacobian_along(self, x: np.ndarray, dt: np.ndarray, t: np.ndarray, u: list) -> np.ndarray:
+        """Jacobians ``(K, n, n)`` of :meth:`transition` at the ``K`` states ``x`` ``(K, n)`` of a trajectory,
+        each over its own ``dt[k]`` from its own ``t[k]`` (``(K,)`` each) with its own input ``u[k]`` (None:
+        none): what the observability tracker needs to rebuild its recursions. The default calls
+        :meth:`transition_jacobian` once per state; a model overrides it to do them in one call, with the same
+        numbers."""
+        out = np.empty((len(dt), self.state_dim, self.state_dim))
+        for k, (step, start, inputs) in enumerate(zip(dt, t, u)):
+            out[k] = self.transition_jacobian(x[k:k + 1], float(step), float(start), inputs)[0]
+        return out
+
     @abstractmethod
     def process_noise(self, dt: float, t: float = 0.0) -> np.ndarray:
         """Covariance ``(n, n)`` of the state noise accumulated over ``[t, t + dt]``.
@@ -132,6 +154,15 @@ class StateSpaceModel(ABC):
     @abstractmethod
     def measurement_jacobian(self, x: np.ndarray, t: float = 0.0) -> np.ndarray:
         """Measurement Jacobian ``H(x, t)``: ``(N, n) -> (N, m, n)``."""
+
+    def measurement_jacobian_along(self, x: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Measurement Jacobians ``(K, m, n)`` at the ``K`` states ``x`` ``(K, n)``, each at its own time
+        ``t[k]`` (the observability tracker's rebuild). The default calls :meth:`measurement_jacobian` once
+        per state; a model overrides it to do them in one call, with the same numbers."""
+        out = np.empty((len(t), self.measurement_dim, self.state_dim))
+        for k, time in enumerate(t):
+            out[k] = self.measurement_jacobian(x[k:k + 1], float(time))[0]
+        return out
 
     @property
     def time_varying_noise(self) -> bool:
@@ -157,6 +188,16 @@ class StateSpaceModel(ABC):
         True. False (the default): the compensation does it from :meth:`transition` and
         :meth:`compensation_frame`, with the same numbers."""
         return False
+
+    def pushed_transition_chain(self, x: np.ndarray, a: np.ndarray, dt: np.ndarray, t: np.ndarray, u: list,
+                                velocity_gain: np.ndarray, position_gain: np.ndarray, decay: np.ndarray,
+                                driven: np.ndarray, integrated: np.ndarray) -> np.ndarray | None:
+        """Optional fast path of the compensated :meth:`transition_chain`: ``(K + 1, n + p)``, the state ``x``
+        ``(n,)`` with the acceleration ``a`` ``(p,)`` and after each of ``K`` compensated transitions in turn
+        (:meth:`pushed_transition` with the ``k``-th of ``dt``, ``t``, ``u``, ``velocity_gain`` and
+        ``position_gain``, then ``a`` times ``decay[k]``). None (the default): the compensation makes the
+        calls."""
+        return None
 
     def compensation_push_derivative(self, x: np.ndarray, a: np.ndarray, relative_step: float
                                      ) -> np.ndarray | None:

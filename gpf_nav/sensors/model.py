@@ -51,6 +51,9 @@ class ModelSensor(Sensor):
     def measure_and_jacobian(self, x, t=0.0):
         return self.model.measure_and_jacobian(x, t)
 
+    def jacobian_along(self, x, t):
+        return self.model.measurement_jacobian_along(x, t)
+
     def noise(self, t=0.0):
         return self.model.measurement_noise()
 

@@ -96,6 +96,15 @@ class Sensor(ABC):
     def jacobian(self, x: np.ndarray, t: float = 0.0) -> np.ndarray:
         """Its Jacobian ``(N, n) -> (N, m, n)``."""
 
+    def jacobian_along(self, x: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Jacobians ``(K, m, n)`` at the ``K`` states ``x`` ``(K, n)``, each at its own time ``t[k]`` (the
+        observability tracker's rebuild). The default calls :meth:`jacobian` once per state; a sensor
+        overrides it to do them in one call, with the same numbers."""
+        out = np.empty((len(t), self.dim, x.shape[1]))
+        for k, time in enumerate(t):
+            out[k] = self.jacobian(x[k:k + 1], float(time))[0]
+        return out
+
     @abstractmethod
     def noise(self, t: float = 0.0) -> np.ndarray:
         """Noise covariance ``R`` ``(m, m)`` at ``t`` (never written after it is returned)."""
@@ -159,6 +168,9 @@ class Padded(Sensor):
     def measure_and_jacobian(self, x, t=0.0):
         h, H = self.sensor.measure_and_jacobian(x[:, :self._n], t)
         return h, self._pad(H)
+
+    def jacobian_along(self, x, t):
+        return self._pad(self.sensor.jacobian_along(x[:, :self._n], t))
 
     def _pad(self, H: np.ndarray) -> np.ndarray:
         out = np.zeros((H.shape[0], H.shape[1], self._total))
