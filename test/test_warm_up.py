@@ -93,3 +93,19 @@ def test_a_failed_warm_up_is_reported_not_raised():
     broken.factory = lambda: make_filter("no-such-filter", model)
     seconds, error = warm_up(broken, initial_state(ScenarioConfig()))
     assert error.startswith(("ValueError", "KeyError")) and not broken.initialized
+
+
+@pytest.mark.parametrize("name", ["gpf", "ekf"])
+def test_the_warm_up_runs_with_a_prior_handed_over_at_a_stamp(name):
+    """``initial_state`` at ``initial_stamp`` (a prior given at a ROS time, as ``gpf-nav bench --node``
+    gives it): the rehearsal's stamps start there. They started at 0 and were refused as older than the
+    prior, so the warm-up failed and the first updates waited for the kernels."""
+    model = filter_model(ScenarioConfig())
+    state = initial_state(ScenarioConfig())
+    config = EngineConfig(initial_state=state, initial_std=np.array([1e3, 1e3, 1e3, 1.0, 1.0, 1.0]),
+                          initial_stamp=1.7e9)
+    engine = EstimatorEngine(lambda: make_filter(name, model, n_particles=100, seed=1), model, config)
+    mean, stamp = engine.mean.copy(), engine.t_ns  # (initialised from the parameters already)
+    seconds, error = warm_up(engine, state)
+    assert error == ""
+    assert np.array_equal(engine.mean, mean) and engine.t_ns == stamp and not engine.counters.accepted

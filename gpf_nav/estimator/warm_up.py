@@ -43,17 +43,20 @@ def warm_up(engine: EstimatorEngine, state: np.ndarray) -> tuple[float, str]:
     try:
         rehearsal = EstimatorEngine(engine.factory, engine.model, engine.config, monotonic=lambda: steady[0])
         model, x = engine.model, np.asarray(state, dtype=float)[None]
+        start_ns = max(0, int(round(engine.config.initial_stamp * NS)))  # (the prior's stamp, when one is set)
         updates = 0
         for k in range(1, engine.config.init_window + UPDATES + 1):
             for j in range(IMU_PER_PERIOD):
-                rehearsal.imu(int(((k - 1) * PERIOD + j * PERIOD / IMU_PER_PERIOD) * NS), SPECIFIC_FORCE, None)
+                rehearsal.imu(start_ns + int(((k - 1) * PERIOD + j * PERIOD / IMU_PER_PERIOD) * NS), SPECIFIC_FORCE,
+                              None)
             x = model.transition(x, PERIOD, (k - 1) * PERIOD, SPECIFIC_FORCE)
             steady[0] += PERIOD
-            ok, reason = rehearsal.measurement(int(k * PERIOD * NS), model.measure(x, k * PERIOD)[0], None)
+            ok, reason = rehearsal.measurement(start_ns + int(k * PERIOD * NS), model.measure(x, k * PERIOD)[0],
+                                               None)
             if not ok:
                 raise RuntimeError(f"measurement {k} refused: {reason}")
             updates += reason != "buffered"
-            rehearsal.extrapolate(int((k + 0.5) * PERIOD * NS))
+            rehearsal.extrapolate(start_ns + int((k + 0.5) * PERIOD * NS))
         if updates < UPDATES or rehearsal.reinit_count or not np.isfinite(rehearsal.mean).all():
             raise RuntimeError(f"{updates} updates, {rehearsal.reinit_count} re-initialisations, mean "
                                f"{rehearsal.mean}: the throwaway filter did not run as the node's would")
