@@ -239,6 +239,9 @@ def test_lifecycle_transitions_through_the_standard_services(graph):
     warnings = [line for line in text.splitlines() if "nosuch_param" in line]
     assert len(warnings) == 1 and "WARN" in warnings[0] and "does not declare" in warnings[0], text
     assert "inactive: stopped publishing and consuming measurements" in text
+    # configure keeps the start-up's objects (about 150 000) out of the garbage collector's full scans
+    frozen = [int(line.split("]: ")[1].split()[0]) for line in text.splitlines() if "start-up objects kept" in line]
+    assert len(frozen) == 1 and frozen[0] > 10_000, text
     no_tf = [line for line in text.splitlines() if "no TF is published" in line]
     assert len(no_tf) == (0 if _tf2_msgs_in(graph.env) else 1), text
 

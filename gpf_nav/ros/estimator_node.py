@@ -44,6 +44,7 @@ from std_srvs.srv import Trigger
 
 from gpf_nav.allocator import retain_freed_memory
 from gpf_nav.blas import limit_blas_threads
+from gpf_nav.collector import freeze_start_up, thaw
 from gpf_nav.estimator.factory import FILTERS
 from gpf_nav.estimator.params import ESTIMATOR, ParameterError
 from gpf_nav.ros import conversions as conv
@@ -190,6 +191,8 @@ class EstimatorNode(LifecycleNode):
                                    self.create_timer(1.0 / p["publish_rate"], self._on_publish_timer)))
         self._entities.append((self.destroy_timer, self.create_timer(p["diagnostics_period"],
                                                                      self._on_diagnostics_timer, clock=self._steady)))
+        frozen = freeze_start_up()  # out of the collector's full scans (gpf_nav.collector)
+        self.get_logger().info(f"{frozen} start-up objects kept out of the garbage collector's full scans")
 
     def _configure_failed(self, reason: str, result: TransitionCallbackReturn) -> TransitionCallbackReturn:
         self._release()
@@ -207,6 +210,7 @@ class EstimatorNode(LifecycleNode):
                 self.destroy_lifecycle_publisher(publisher)
         self._entities, self._publishers_by_topic, self._tf_publisher = [], {}, None
         self.core = self.engine = None
+        thaw()
 
     # --- callbacks ---------------------------------------------------------------------------------
     def _on_set_parameters(self, params) -> SetParametersResult:
