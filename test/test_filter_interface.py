@@ -12,6 +12,7 @@ import pytest
 from gpf_nav import registry
 from gpf_nav.estimator.factory import FILTERS, make_filter
 from gpf_nav.filters import Filter, SensorBiasFilter
+from gpf_nav.filters.multiple_model import MultipleModelGPF
 from gpf_nav.filters.interface import (CAPABILITIES, CLOUD, COMPENSATION, COSTATE, GATE, MODEL_PROBABILITIES,
                                        RESAMPLING, SENSOR_BIAS, TEMPERING)
 from gpf_nav.sensors import ModelSensor, random_constant_bias
@@ -109,3 +110,9 @@ def test_every_filter_is_a_filter_and_answers_what_it_declares(make):
         else:
             assert ABSENT[capability](flt), capability
     assert flt.recoveries == 0 and flt.initialized and flt.time > 0 and flt.observability is not None
+    # the trackers it runs (a multiple-model filter's: one per member); one of them makes its report
+    trackers = flt.observability_trackers()
+    assert trackers and all(tracker.ready and tracker.updates > 0 for tracker in trackers)
+    assert any(tracker.report() is flt.observability for tracker in trackers)
+    runs = flt.filter if isinstance(flt, SensorBiasFilter) else flt
+    assert len(trackers) == (len(runs.members) if isinstance(runs, MultipleModelGPF) else 1)

@@ -15,6 +15,7 @@ from gpf_nav.sim.scenario import ScenarioConfig, filter_model, initial_state
 
 _FRESH_PROCESS = textwrap.dedent("""
     import importlib, json, pkgutil, sys
+    import numpy as np
     import gpf_nav.kernels
     from gpf_nav.estimator.params import ESTIMATOR
     from gpf_nav.ros.message_layer import MessageLayer
@@ -48,14 +49,10 @@ _FRESH_PROCESS = textwrap.dedent("""
         elif event.kind == "measurement":
             accepted += layer.engine.measurement(event.t_ns, list(event.data), None)[0]
             layer.engine.extrapolate(event.t_ns + 100_000_000)
-    # a reanchoring, minutes in: every tracker of the filter and its members rebuilt
-    stack = [layer.engine.filter]
-    while stack:
-        flt = stack.pop()
-        stack += [*getattr(flt, "members", ()), *[f for f in [getattr(flt, "filter", None)] if f is not None]]
-        tracker = getattr(flt, "_observability", None)
-        if tracker is not None and tracker.ready:
-            tracker.reanchor(flt.mean)
+    # a reanchoring, minutes in: every tracker of the filter (its members') moved to the filter's mean
+    mean = layer.engine.filter.mean
+    for tracker in layer.engine.filter.observability_trackers():
+        tracker.reanchor(np.r_[mean, tracker.reference[mean.size:]])
     print(json.dumps(dict(ok=ok, line=line, before=before, warmed=warmed, after=signatures(),
                           accepted=accepted, initialized=layer.engine.initialized)))
 """)

@@ -13,7 +13,6 @@ runs is untouched.
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
 
 import numpy as np
 
@@ -60,18 +59,10 @@ def warm_up(engine: EstimatorEngine, state: np.ndarray) -> tuple[float, str]:
         if updates < UPDATES or rehearsal.reinit_count or not np.isfinite(rehearsal.mean).all():
             raise RuntimeError(f"{updates} updates, {rehearsal.reinit_count} re-initialisations, mean "
                                f"{rehearsal.mean}: the throwaway filter did not run as the node's would")
-        for flt in _filters(rehearsal.filter):
-            tracker = getattr(flt, "_observability", None)
-            if tracker is not None and tracker.ready:
+        for tracker in rehearsal.filter.observability_trackers():
+            if tracker.ready:
                 tracker.reanchor(tracker.reference)
     except Exception as err:  # noqa: BLE001 - reported, never fatal
         return time.perf_counter() - start, f"{type(err).__name__}: {err}"
     return time.perf_counter() - start, ""
 
-
-def _filters(flt) -> Iterator:
-    """``flt`` and the filters it runs: a multiple-model filter's members, a bias filter's inner filter."""
-    yield flt
-    for inner in (*getattr(flt, "members", ()), getattr(flt, "filter", None)):
-        if inner is not None:
-            yield from _filters(inner)

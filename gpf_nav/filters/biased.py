@@ -70,6 +70,9 @@ class SensorBiasFilter(Filter):
         """The observability report of :attr:`filter` (its state includes the biases)."""
         return self.filter.observability
 
+    def observability_trackers(self):
+        return self.filter.observability_trackers()
+
     @property
     def particles(self) -> np.ndarray | None:
         """Particles ``(N, n + n_b)`` of :attr:`filter`, biases included."""

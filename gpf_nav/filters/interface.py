@@ -159,6 +159,11 @@ class Filter(ABC):
         (:mod:`gpf_nav.integrity.observability`); None before :meth:`initialize`."""
         return self._observability.report()
 
+    def observability_trackers(self) -> tuple[ObservabilityTracker, ...]:
+        """The observability trackers this filter runs: its own; a filter that runs others, theirs (the
+        estimator's warm-up rehearses their reanchoring)."""
+        return (self._observability,)
+
     def _observe_predict(self, dt: float, u) -> None:
         """Carry the observability recursions over ``dt`` (call before :attr:`time` moves)."""
         self._observability.predict(dt, self.time, u)

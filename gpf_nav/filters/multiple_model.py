@@ -190,6 +190,9 @@ class MultipleModelGPF(Filter):
         data determined of the user's state (the compensated member's also counts its accelerations)."""
         return self.nominal.observability
 
+    def observability_trackers(self):
+        return tuple(tracker for member in self.members for tracker in member.observability_trackers())
+
     @property
     def unmodelled_acceleration(self) -> np.ndarray:
         """Model-averaged unmodelled acceleration ``(p,)`` (the nominal model's is zero)."""
