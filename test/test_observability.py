@@ -375,3 +375,9 @@ def test_the_rebuild_gives_the_numbers_of_its_calls_one_at_a_time(kind):
     if kind != "user model":  # (a linear model's Jacobians do not depend on the reference)
         assert not np.array_equal(tracker._data, before)  # the rebuild moved the recursions
     assert np.array_equal(tracker._free, free) and np.array_equal(tracker._data, data)
+
+
+def test_the_rebuild_cost_tool_times_a_full_log():
+    from gpf_nav.tools import rebuild_cost
+    row = rebuild_cost.measure("ekf-comp", 30, repeats=1)
+    assert row["state"] == 9 and row["predictions"] == 30 and row["updates"] == 30 and row["rebuild_ms"] > 0

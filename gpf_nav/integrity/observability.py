@@ -160,9 +160,9 @@ class ObservabilityTracker:
 
     def _rebuild(self) -> None:
         """Both recursions again from the prior, linearised along the model's trajectory that reaches the
-        reference now: carried back through the logged predictions, then forward through the log, the
-        Jacobians along it in one call each (:meth:`~gpf_nav.models.state_space.StateSpaceModel.transition_jacobian_along`,
-        :meth:`~gpf_nav.sensors.sensor.Sensor.jacobian_along` per sensor) and the recursions in one kernel
+        reference now: carried back through the logged predictions (``transition_chain``), then forward
+        through the log, the Jacobians along it in one call each (the model's ``transition_jacobian_along``,
+        each sensor's ``jacobian_along``) and the recursions in one kernel
         (:func:`~gpf_nav.kernels.information.replay`)."""
         log = self._log
         if log is None or log.full:
@@ -206,21 +206,18 @@ class ObservabilityTracker:
         by_sensor: dict[int, list[int]] = {}
         for j, (sensor, _, _) in enumerate(updates):
             by_sensor.setdefault(id(sensor), []).append(j)
-        groups = []
-        for members in by_sensor.values():
-            sensor = updates[members[0]][0]
+        groups, count = [], np.zeros(len(updates), dtype=np.int64)
+        for members in map(np.array, by_sensor.values()):
             masks = np.array([updates[j][1] for j in members], dtype=bool)  # (G, m)
-            times = np.array([updates[j][2] for j in members], dtype=float)
-            groups.append((sensor, np.array(members), masks, times))
-        count = np.zeros(len(updates), dtype=np.int64)
-        for _, members, masks, _ in groups:
+            groups.append((updates[members[0]][0], members, masks))
             count[members] = masks.sum(axis=1)
         width = int(count.max()) if count.size else 0
         H, R = np.zeros((len(updates), width, n)), np.zeros((len(updates), width, width))
-        for sensor, members, masks, times in groups:
-            jacobians = sensor.jacobian_along(x[members], times)  # (G, m, n)
-            noises = np.array([sensor.noise(t) for t in times.tolist()], dtype=float).reshape(len(members),
-                                                                                             *masks.shape[1:] * 2)
+        for sensor, members, masks in groups:
+            times = [updates[j][2] for j in members]
+            jacobians = sensor.jacobian_along(x[members], np.array(times, dtype=float))  # (G, m, n)
+            m = masks.shape[1]
+            noises = np.array([sensor.noise(t) for t in times], dtype=float).reshape(len(members), m, m)
             patterns, which = np.unique(masks, axis=0, return_inverse=True)
             for pattern, rows in enumerate(patterns):  # the updates that measured the same rows, together
                 index, measured = np.flatnonzero(which.ravel() == pattern), np.flatnonzero(rows)
