@@ -389,6 +389,46 @@ def test_diagnostics_levels():
     assert diag.filter_status(eng, _stamp(s, 0) + S, th, "gpf")[0] == diag.ERROR
 
 
+def test_diagnostics_warn_when_the_imu_falls_silent():
+    """A silent sensor: an IMU heard, then silent for longer than ``imu_timeout`` (the filter then predicts
+    without its input) is WARN, with the sample's age; never heard, it is no fault."""
+    from gpf_nav.ros import diagnostics as diag
+    s = generate(SHORT, 8)
+    eng, _ = _engine(s)
+    th = diag.Thresholds(ess_warn=0.05, costate_warn=1e12, sensor_timeout=10.0)
+    eng.measurement(_stamp(s, 0), s.measurements[0], None)
+    level, message, values = diag.filter_status(eng, _stamp(s, 0) + 5 * S, th, "gpf")
+    assert level == diag.OK and dict(values)["last IMU sample age"] == "none yet"
+    assert eng.imu(_stamp(s, 0) + S, np.array([0.0, 0.0, 0.5]), None) == (True, "")
+    eng.measurement(_stamp(s, 1), s.measurements[1], None)
+    level, message, values = diag.filter_status(eng, _stamp(s, 0) + int(1.5 * S), th, "gpf")
+    assert level == diag.OK and dict(values)["last IMU sample age"] == "0.5"
+    level, message, values = diag.filter_status(eng, _stamp(s, 0) + 4 * S, th, "gpf")
+    assert level == diag.WARN and "no IMU sample for 3.0 s: predicting without input" in message
+    assert dict(values)["last IMU sample age"] == "3"
+
+
+
+def test_the_message_layer_logs_a_silent_imu_once_per_throttle_period():
+    pytest.importorskip("rclpy")
+    from gpf_nav.estimator.params import ESTIMATOR
+    from gpf_nav.ros.message_layer import MessageLayer
+    lines = []
+
+    class Log:
+        def info(self, line):
+            lines.append(line)
+        warning = error = info
+
+    layer = MessageLayer({spec.name: spec.default for spec in ESTIMATOR}, lambda topic, msg: None, Log())
+    assert layer.engine.imu(10 * S, np.array([0.0, 0.0, 0.5]), None) == (True, "")
+    layer.diagnostics_tick(10 * S + S // 2, 1.0, "gpf_estimator")
+    layer.diagnostics_tick(13 * S, 1.0, "gpf_estimator")
+    layer.diagnostics_tick(14 * S, 1.0, "gpf_estimator")
+    assert [line for line in lines if "IMU" in line] == [
+        "no IMU sample for 3.0 s (imu_timeout 1 s): predicting without input"]
+
+
 # --- simulator schedule ------------------------------------------------------------------------------
 def test_playback_is_deterministic_and_ordered():
     cfg = ScenarioConfig(duration=20.0, case="partial")

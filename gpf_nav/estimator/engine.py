@@ -689,6 +689,13 @@ class EstimatorEngine:
             return None
         return (now_ns - self.last_measurement_ns) * 1e-9
 
+    def imu_age(self, now_ns: int | None) -> float | None:
+        """Seconds from the newest IMU sample's stamp to ``now_ns`` (None before the first one). Past
+        ``imu_timeout`` the filter predicts without an input."""
+        if not self._imu or not now_ns:
+            return None
+        return (now_ns - self._imu[-1][0]) * 1e-9
+
     def filter_stats(self) -> dict:
         """ESS/N and co-state figures of a particle filter, and the estimated unmodelled acceleration
         ``(p,)`` with its standard deviations of a compensated filter (keys absent otherwise)."""

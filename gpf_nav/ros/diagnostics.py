@@ -6,7 +6,8 @@ and the thresholds; :func:`to_msg` turns that into ``diagnostic_msgs/DiagnosticA
 * ERROR: the filter was re-initialised (non-finite output or an exception) within ``reinit_hold`` s;
   or the co-state integrity monitor is at FAULT (held ``monitor_hold`` s);
 * WARN: not initialised yet; ESS/N below ``ess_warn_threshold``; mean co-state norm above
-  ``costate_warn_threshold``; no measurement accepted for ``sensor_timeout`` s (node clock); the
+  ``costate_warn_threshold``; no measurement accepted for ``sensor_timeout`` s (node clock); an IMU
+  heard before and silent for longer than ``imu_timeout`` (the filter predicts without its input); the
   integrity monitor at WARN (held ``monitor_hold`` s); or, from :data:`OBSERVABILITY_WARN_AFTER` s after
   the prior, a direction of the state the measurements have not determined (the observability report,
   :mod:`gpf_nav.integrity.observability`: along it the estimate is the prior's, whatever the
@@ -78,6 +79,10 @@ def filter_status(engine, now_ns: int | None, thresholds: Thresholds, filter_nam
     if silent_for > thresholds.sensor_timeout:
         level = max(level, WARN)
         problems.append(f"no measurement for {silent_for:.1f} s")
+    imu_age = engine.imu_age(now_ns)
+    if imu_age is not None and imu_age > engine.config.imu_timeout:
+        level = max(level, WARN)
+        problems.append(f"no IMU sample for {imu_age:.1f} s: predicting without input")
     report = engine.integrity() if hasattr(engine, "integrity") else None
     if report is not None and report.level != "OK":
         level = max(level, INTEGRITY_LEVEL[report.level])
@@ -120,6 +125,7 @@ def filter_status(engine, now_ns: int | None, thresholds: Thresholds, filter_nam
         ("messages rejected", str(c.total_rejected)),
         ("masked components", str(c.masked)),
         ("last measurement age", _fmt(age) if age is not None else "none yet"),
+        ("last IMU sample age", _fmt(imu_age) if imu_age is not None else "none yet"),
         ("reinitializations", str(engine.reinit_count)),
     ]
     for stream in STREAMS:
