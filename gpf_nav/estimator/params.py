@@ -124,7 +124,7 @@ ESTIMATOR = [
     *_group(
         "Node only (gpf-nav replay accepts and ignores them): lifecycle and TF",
         Spec("autostart", True, "Configure and activate at start-up; false: wait unconfigured for a lifecycle manager (lifecycle_msgs services ~/change_state, ~/get_state)."),
-        Spec("warm_up", True, "On configure, before subscribing, run a throwaway copy of the filter on a short noise-free trajectory so that its compiled kernels are loaded (compiled on an install's first start, about 12 s on 2 cores) before the first message; false: the first update waits for them."),
+        Spec("warm_up", True, "On configure, before subscribing, run a throwaway copy of the filter on a short noise-free trajectory, and a reanchoring of its observability trackers, so that its compiled kernels are loaded (compiled on an install's first start, about 16 s on 2 cores) before the first message; false: the first update, and the first reanchoring, wait for them."),
         Spec("publish_tf", True, "Publish tf_frame_id -> tf_child_frame_id on /tf with every odometry message (needs tf2_msgs)."),
         Spec("tf_frame_id", "", "Parent frame of the published transform; '' = world_frame."),
         Spec("tf_child_frame_id", "", "Child frame of the published transform; '' = base_frame."),
