@@ -696,6 +696,11 @@ class EstimatorEngine:
             return None
         return (now_ns - self._imu[-1][0]) * 1e-9
 
+    def imu_silent(self, now_ns: int | None) -> bool:
+        """Whether an IMU heard before has been silent for longer than ``imu_timeout`` at ``now_ns``."""
+        age = self.imu_age(now_ns)
+        return age is not None and age > self.config.imu_timeout
+
     def filter_stats(self) -> dict:
         """ESS/N and co-state figures of a particle filter, and the estimated unmodelled acceleration
         ``(p,)`` with its standard deviations of a compensated filter (keys absent otherwise)."""

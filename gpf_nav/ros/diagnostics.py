@@ -80,7 +80,7 @@ def filter_status(engine, now_ns: int | None, thresholds: Thresholds, filter_nam
         level = max(level, WARN)
         problems.append(f"no measurement for {silent_for:.1f} s")
     imu_age = engine.imu_age(now_ns)
-    if imu_age is not None and imu_age > engine.config.imu_timeout:
+    if engine.imu_silent(now_ns):
         level = max(level, WARN)
         problems.append(f"no IMU sample for {imu_age:.1f} s: predicting without input")
     report = engine.integrity() if hasattr(engine, "integrity") else None

@@ -383,10 +383,9 @@ class MessageLayer:
                                                  hardware_id=hardware_id))
         if not self.engine.initialized and self._throttled("_not_initialized"):
             self.logger.warning(f"filter not initialised: no odometry yet; {self.engine.waiting_for()}")
-        imu_age = self.engine.imu_age(now_ns)
-        if imu_age is not None and imu_age > self.engine.config.imu_timeout and self._throttled("_imu_silent"):
-            self.logger.warning(f"no IMU sample for {imu_age:.1f} s (imu_timeout {self.engine.config.imu_timeout:g} "
-                                "s): predicting without input")
+        if self.engine.imu_silent(now_ns) and self._throttled("_imu_silent"):
+            self.logger.warning(f"no IMU sample for {self.engine.imu_age(now_ns):.1f} s (imu_timeout "
+                                f"{self.engine.config.imu_timeout:g} s): predicting without input")
         return level, message
 
 
