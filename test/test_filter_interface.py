@@ -1,6 +1,7 @@
 """The filter interface (gpf_nav/filters/interface.py): every filter the registry and the node's factory
 make is a ``Filter``, declares its optional capabilities and answers each of them; nothing in gpf_nav
-finds a filter's extras by probing (``hasattr``/``getattr``) or forwards them with ``__getattr__``."""
+finds a filter's extras (or the estimator engine's) by probing (``hasattr``/``getattr``) or forwards them
+with ``__getattr__``."""
 from __future__ import annotations
 
 import ast
@@ -19,8 +20,10 @@ from gpf_nav.sensors import ModelSensor, random_constant_bias
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 
 PACKAGE = Path(__file__).resolve().parents[1] / "gpf_nav"
-FILTER_NAMES = {"f", "flt", "filter", "fresh", "self.filter", "engine.filter", "self.filter.filter"}
-"""How gpf_nav spells a filter object (the first argument a probe of one would have)."""
+FILTER_NAMES = {"f", "flt", "filter", "fresh", "self.filter", "engine.filter", "self.filter.filter",
+                "engine", "self.engine"}
+"""How gpf_nav spells a filter object, or the estimator engine around one (the first argument a probe of
+one would have)."""
 
 
 def _probes(path: Path) -> list[str]:

@@ -174,6 +174,7 @@ class EstimatorEngine:
         self.integrity_fault_updates = 0      # cumulative, like the counters
         self.integrity_warn_updates = 0
         self.integrity_resets = 0
+        self._skipped = 0                     # updates the integrity monitor skipped since its reset
         self.integrity_error = ""
         self.consistency = ConsistencyMonitor(**config.consistency) if config.consistency is not None else None
         self.consistency_fault_updates = 0    # cumulative
@@ -586,7 +587,7 @@ class EstimatorEngine:
             self.consistency.reset()
         if self.monitor is None:
             return
-        if self.monitor.samples or getattr(self, "_skipped", 0):
+        if self.monitor.samples or self._skipped:
             self.integrity_resets += 1
         self.monitor.reset()
         self._skipped = 0

@@ -22,8 +22,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from gpf_nav.estimator.input_checks import REASONS
+
+if TYPE_CHECKING:
+    from gpf_nav.estimator.engine import EstimatorEngine
 
 OK, WARN, ERROR = 0, 1, 2
 STATUS_NAME = "gpf_estimator: filter"
@@ -51,7 +55,7 @@ def _vector(value) -> str:
     return "n/a" if value is None else " ".join(f"{float(v):.6g}" for v in value)
 
 
-def filter_status(engine, now_ns: int | None, thresholds: Thresholds, filter_name: str,
+def filter_status(engine: EstimatorEngine, now_ns: int | None, thresholds: Thresholds, filter_name: str,
                   uptime: float = 0.0) -> tuple[int, str, list[tuple[str, str]]]:
     """``(level, message, [(key, value), ...])`` describing ``engine`` at node time ``now_ns``.
 
@@ -83,18 +87,18 @@ def filter_status(engine, now_ns: int | None, thresholds: Thresholds, filter_nam
     if engine.imu_silent(now_ns):
         level = max(level, WARN)
         problems.append(f"no IMU sample for {imu_age:.1f} s: predicting without input")
-    report = engine.integrity() if hasattr(engine, "integrity") else None
+    report = engine.integrity()
     if report is not None and report.level != "OK":
         level = max(level, INTEGRITY_LEVEL[report.level])
         problems.append(_integrity_problem(report))
-    observability = engine.observability() if hasattr(engine, "observability") else None
+    observability = engine.observability()
     if (observability is not None and observability.undetermined
             and observability.elapsed >= OBSERVABILITY_WARN_AFTER):
         level = max(level, WARN)
         problems.append(f"{observability.undetermined} undetermined direction"
                         f"{'s' if observability.undetermined > 1 else ''}: "
                         + "; ".join(observability.describe(state_names(observability.information.size))))
-    consistency = engine.consistency_report() if hasattr(engine, "consistency_report") else None
+    consistency = engine.consistency_report()
     if consistency is not None and consistency.level == "FAULT":
         level = max(level, WARN)
         s = consistency.alarm if consistency.alarm is not None else consistency.status
@@ -187,7 +191,7 @@ def observability_values(report) -> list[tuple[str, str]]:
     return values
 
 
-def stream_values(engine) -> list[tuple[str, str]]:
+def stream_values(engine: EstimatorEngine) -> list[tuple[str, str]]:
     """Per-stream refusals (``rejected <stream>`` always; ``rejected <stream> <reason>`` when counted),
     the late-measurement history and the estimated sensor biases (``bias <sensor>``, ``bias std <sensor>``:
     one value per component, in the measurement's units)."""
@@ -197,14 +201,13 @@ def stream_values(engine) -> list[tuple[str, str]]:
         by_reason = {reason: n for (s, reason), n in c.rejected_by_stream.items() if s == stream and n}
         values.append((f"rejected {stream}", str(sum(by_reason.values()))))
         values.extend((f"rejected {stream} {reason}", str(n)) for reason, n in sorted(by_reason.items()))
-    history = getattr(engine, "history", None)
-    if history is not None:
-        span = (history.entries[-1].t_ns - history.entries[0].t_ns) * 1e-9 if len(history) else 0.0
-        values += [("late measurements fused", str(engine.late_count)),
-                   ("late IMU samples applied", str(engine.late_imu_count)),
-                   ("inputs re-applied", str(engine.replayed_count)),
-                   ("history inputs", str(len(history))), ("history span [s]", _fmt(span)),
-                   ("history snapshot failures", str(engine.snapshot_failures))]
+    history = engine.history
+    span = (history.entries[-1].t_ns - history.entries[0].t_ns) * 1e-9 if len(history) else 0.0
+    values += [("late measurements fused", str(engine.late_count)),
+               ("late IMU samples applied", str(engine.late_imu_count)),
+               ("inputs re-applied", str(engine.replayed_count)),
+               ("history inputs", str(len(history))), ("history span [s]", _fmt(span)),
+               ("history snapshot failures", str(engine.snapshot_failures))]
     f = engine.filter
     for name in f.sensor_names if engine.initialized else ():
         mean, std = f.sensor_bias(name)
