@@ -20,7 +20,12 @@ of ROS time. Rules:
   ``stale_stamp``.
 * An IMU sample delivered after a measurement stamped after it (the topics arrive in any order) that
   should have been that measurement's input re-applies the history from there in the same way
-  (``late_imu_count``), so the estimate does not depend on the order of the two topics.
+  (``late_imu_count``), so the estimate does not depend on the order of the two topics. The
+  re-application waits until the IMU has caught up with the filter's time (a sample stamped at or after
+  it) or the next measurement, whichever comes first, and runs once from the earliest such sample: an IMU
+  stream lagging by many samples (a backlog after a stall) costs one re-application, not one per sample,
+  which would keep the node too busy to catch up. Predictions between measurements (:meth:`extrapolate`)
+  meanwhile hold the inputs known so far.
 * Initialisation, first match wins: the ``initial_state`` parameter (at ``initial_stamp``, or at the
   first measurement when that is negative); a ``set_state`` (full state) or ``set_pose`` (position)
   message; else the first ``init_window`` measurements through
@@ -199,6 +204,7 @@ class EstimatorEngine:
         self._streaks: dict[str, int] = {}   # gate refusals in a row per stream
         self.late_count = 0                   # late measurements fused at their stamp
         self.late_imu_count = 0               # IMU samples that came after a measurement that needed them
+        self._late_imu_ns: int | None = None  # the earliest of them not yet re-applied
         self.replayed_count = 0               # inputs re-applied after them
         self.snapshot_failures = 0            # filter copies that failed (the history was emptied)
         self._init_buffer: list[tuple[int, np.ndarray]] = []
@@ -234,6 +240,7 @@ class EstimatorEngine:
         self.init_source = source
         self._init_buffer = []
         self.history.clear()
+        self._late_imu_ns = None
         self._streaks = {}
         self._reset_monitor()
         self._store(t_ns)
@@ -259,6 +266,7 @@ class EstimatorEngine:
         time: ``stamp_ns``, or later for a late measurement), ``(True, "buffered")`` when it was kept
         for the initialisation, else ``(False, reason)``; the counters are updated either way.
         """
+        self._apply_late_imu()
         last = None if self.initialized else self.last_measurement_ns
         ok, reason = check_timing(stamp_ns, last, now_ns, int(self.config.max_future * NS))
         late = ok and self.initialized and stamp_ns < self.t_ns
@@ -434,21 +442,36 @@ class EstimatorEngine:
         self.counters.accept("imu")
         if self.initialized and stamp_ns < self.t_ns:
             self._late_imu(stamp_ns, u)
+        else:
+            self._apply_late_imu()  # caught up with the filter's time
         return True, ""
 
     def _late_imu(self, stamp_ns: int, u: np.ndarray) -> None:
         """An IMU sample that arrives after a measurement stamped after it (another topic, delivered
-        first): when it is the input that measurement's prediction should have held, re-apply the history
-        from it, as for a late measurement, so the estimate is that of delivery in stamp order. Beyond the
-        history, or too old to be that input (``imu_timeout``), nothing changes. (An earlier sample than the
-        newest one is ``stale_stamp`` in :meth:`imu`.)"""
+        first): when it is the input that measurement's prediction should have held, the history is to be
+        re-applied from it, as for a late measurement, so the estimate is that of delivery in stamp order
+        (:meth:`_apply_late_imu`, deferred). Beyond the history, or too old to be that input
+        (``imu_timeout``), nothing changes. (An earlier sample than the newest one is ``stale_stamp`` in
+        :meth:`imu`.)"""
         split = self.history.split(stamp_ns)
         if split is None or self._input_at(self.history.entries[split[0]].t_ns) is not u:
+            return
+        self.late_imu_count += 1
+        if self._late_imu_ns is None:  # (samples come in stamp order: the first is the earliest)
+            self._late_imu_ns = stamp_ns
+
+    def _apply_late_imu(self) -> None:
+        """Re-apply the history from the earliest late IMU sample not yet applied (:meth:`_late_imu`), once
+        for all of them."""
+        if self._late_imu_ns is None:
+            return
+        split = self.history.split(self._late_imu_ns)
+        self._late_imu_ns = None
+        if split is None:
             return
         redo = self._rewind(split[1])
         for entry in redo:
             self._update(entry.t_ns, entry.y, entry.stream, entry.sensor, feed_monitor=False)
-        self.late_imu_count += 1
         self.replayed_count += len(redo)
 
     def _rewind(self, j: int) -> list[Entry]:
