@@ -30,7 +30,9 @@ compared with the ``rejected <reason>`` and ``accepted rae`` counters of the est
 ``/diagnostics``: every message sent must be accounted for, reason by reason.
 
 Pass/fail (exit code 0/1): the run completed, the estimator process was alive to the end and exited
-cleanly on SIGINT, counters match the prediction exactly, no ``internal_error`` or ``filter_error``, no
+cleanly on SIGINT, counters match the prediction exactly, the estimator counted all but at most
+``--max-imu-loss`` of the simulator's IMU samples (they are not injected into: a node that keeps up loses
+none; one that falls behind loses the overflow of its queue), no ``internal_error`` or ``filter_error``, no
 non-finite number on any output, no ERROR/FATAL line or traceback in the estimator's log, and the
 estimate follows the truth: the median position error over the second half of the compared estimates
 is at most ``--max-error`` (a diverged filter ends thousands of kilometres off). RSS figures are
@@ -101,6 +103,9 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--timeout", type=float, default=None, help="wall-clock limit, s (default: generous)")
     ap.add_argument("--max-error", type=float, default=2000.0,
                     help="largest median position error over the second half of the run, m (default 2000)")
+    ap.add_argument("--max-imu-loss", type=float, default=0.01,
+                    help="largest fraction of the simulator's IMU samples the estimator may not count "
+                         "(default 0.01: a node that keeps up loses none)")
     ap.add_argument("--keep-log", action="store_true",
                     help="keep the estimator's log file (it is kept anyway when the soak fails)")
     ap.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -545,6 +550,8 @@ def _summarise(args, sim, ledger: Ledger, listener: Listener, alive: bool, exit_
     errors = listener.errors()
     late = errors[errors.size // 2:]
     late_median = float(np.median(late)) if late.size else math.nan
+    imu_published, imu_accepted = sim.published["imu"], int(v.get("accepted imu", -1))
+    imu_loss = 1.0 - imu_accepted / imu_published if imu_published else 0.0
     non_finite = sum(listener.non_finite.values())
     log_problems = [line for line in log_text.splitlines() if "Traceback" in line or "internal_error" in line
                     or "[ERROR]" in line or "[FATAL]" in line]
@@ -553,6 +560,7 @@ def _summarise(args, sim, ledger: Ledger, listener: Listener, alive: bool, exit_
         "estimator alive to the end": alive,
         "estimator exited cleanly on SIGINT": exit_code == 0,
         "every message accounted for": accounted,
+        f"IMU samples counted (at most {args.max_imu_loss:.0%} lost)": imu_loss <= args.max_imu_loss,
         "no internal_error or filter_error": counted["internal_error"] == 0 and counted["filter_error"] == 0,
         "no non-finite output": non_finite == 0 and listener.counts["odometry/filtered"] > 0,
         "no ERROR, FATAL or traceback in the estimator log": not log_problems,
@@ -576,8 +584,8 @@ def _summarise(args, sim, ledger: Ledger, listener: Listener, alive: bool, exit_
         "wall_seconds": round(wall, 1),
         "wall_seconds_simulation": round(sim_wall, 1),
         "simulator_measurements": sim.published["measurement"],
-        "imu_published": sim.published["imu"],
-        "imu_accepted": int(v.get("accepted imu", -1)),
+        "imu_published": imu_published,
+        "imu_accepted": imu_accepted,
         "stream": dict(ledger.stream),
         "garbage": dict(ledger.garbage),
         "garbage_single": ledger.singles,
