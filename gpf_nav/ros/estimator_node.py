@@ -181,10 +181,14 @@ class EstimatorNode(LifecycleNode):
             self.get_logger().warning(f"publish_tf is true but {TF_UNAVAILABLE}: no TF is published "
                                       "(docs/ros.md, TF)")
         qos = {"set_pose": reliable, "set_state": handover}
+        # the IMU first: the executor takes the subscriptions that are ready in the order they were made, so
+        # a sample and the measurement it precedes, ready together, are handled in stamp order (the other way
+        # round, the measurement's history is re-applied when the sample comes: engine, late IMU samples)
+        inputs = sorted(self.core.inputs.items(), key=lambda item: item[1][0] != "imu")
         self._entities = [(self.destroy_subscription,
                            self.create_subscription(msg_type, topic, self._callback(stream),
                                                     qos.get(stream, sensor_qos)))
-                          for topic, (stream, msg_type) in self.core.inputs.items()]
+                          for topic, (stream, msg_type) in inputs]
         self._entities.append((self.destroy_service, self.create_service(Trigger, "~/reset", self._on_reset)))
         if p["publish_rate"] > 0:
             self._entities.append((self.destroy_timer,
