@@ -47,10 +47,13 @@ def test_demo_text_summary(private_domain, capsys):
 def test_latency_benchmark_small(private_domain):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     result = subprocess.run([sys.executable, "-m", "gpf_nav.tools.latency", "--rates", "20", "--particles", "200",
-                             "--seconds", "1.5", "--warmup", "5", "--json"], env=env, capture_output=True,
-                            text=True, timeout=240)
+                             "--seconds", "1.5", "--warmup", "5", "--imu-per-measurement", "2", "--json"],
+                            env=env, capture_output=True, text=True, timeout=240)
     assert result.returncode == 0, result.stderr[-3000:]
     rows = json.loads(result.stdout)
     assert len(rows) == 1 and rows[0]["particles"] == 200 and rows[0]["rate_hz"] == 20.0
     # figures, not limits (a busy machine sheds input and stretches latency): measured and consistent
     assert 0 < rows[0]["answered"] <= 1 and 0 < rows[0]["p50_ms"] <= rows[0]["p99_ms"]
+    # the IMU samples sent before each measurement reached the estimator (its diagnostics count them)
+    assert rows[0]["imu_per_measurement"] == 2 and 0 < rows[0]["imu_accepted"] <= 2 * (5 + 30)
+    assert 0 <= rows[0]["late_imu_applied"] <= rows[0]["imu_accepted"]

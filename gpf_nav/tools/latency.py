@@ -13,7 +13,9 @@ the wall time from ``publish()`` to the reception of the odometry carrying the s
 in this process. Reported per rate: p50, p99, max, the fraction of measurements answered, and
 ``backlog_growth_ms`` = median latency of the last quarter minus that of the first quarter (a queue
 that grows shows as a large positive value; a full best-effort queue sheds messages instead, which
-shows as ``answered`` < 1).
+shows as ``answered`` < 1). With ``--imu-per-measurement K`` each measurement is preceded by K ``imu``
+samples (zero specific force, stamped in the 0.1 s before it), as an IMU-driven node receives them; the
+estimator's ``late IMU samples applied`` and ``accepted imu`` counters are then reported too.
 """
 from __future__ import annotations
 
@@ -56,6 +58,8 @@ def _parser() -> CommandParser:
     ap.add_argument("--seconds", type=positive_float, default=5.0, help="wall seconds of input per rate (default 5)")
     ap.add_argument("--filter", default="gpf", choices=FILTERS, help="estimator filter (default gpf)")
     ap.add_argument("--warmup", type=int, default=20, help="messages sent (at 10 Hz) and discarded first")
+    ap.add_argument("--imu-per-measurement", type=int, default=0,
+                    help="IMU samples published before each measurement (default 0: no IMU)")
     ap.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: the environment's)")
     ap.add_argument("--json", action="store_true", help="print the results as JSON")
     return ap
@@ -72,10 +76,18 @@ class _Bench:
         self.sent: dict[int, float] = {}
         self.received: dict[int, float] = {}
         self._lock = threading.Lock()
+        from diagnostic_msgs.msg import DiagnosticArray
+        from sensor_msgs.msg import Imu
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
         self.pub = node.create_publisher(Vector3Stamped, "measurements/rae", qos)
+        self.imu_pub = node.create_publisher(Imu, "imu", qos)
         node.create_subscription(Odometry, "odometry/filtered", self._on_odom, 100)
-        self.msg_type = Vector3Stamped
+        node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
+        self.diagnostics: dict[str, str] = {}
+        self.imu_per_measurement = 0
+        self._imu = Imu()
+        self._imu.header.frame_id = "base_link"
+        self._imu.orientation.w = 1.0
 
     def _on_odom(self, msg) -> None:
         t = time.perf_counter()
@@ -83,8 +95,18 @@ class _Bench:
         with self._lock:
             self.received.setdefault(ns, t)
 
+    def _on_diagnostics(self, msg) -> None:
+        from gpf_nav.ros.diagnostics import STATUS_NAME, parse_values
+        for status in msg.status:
+            if status.name == STATUS_NAME:
+                self.diagnostics = parse_values(status)
+
     def send(self, stamp_ns: int, y) -> None:
-        from gpf_nav.ros.conversions import vector3_stamped
+        from gpf_nav.ros.conversions import ns_to_stamp, vector3_stamped
+        k = self.imu_per_measurement
+        for j in range(k):
+            self._imu.header.stamp = ns_to_stamp(stamp_ns - (k - j) * 100_000_000 // k)
+            self.imu_pub.publish(self._imu)
         msg = vector3_stamped(y, stamp_ns, "station")
         with self._lock:
             self.sent[stamp_ns] = time.perf_counter()
@@ -163,10 +185,11 @@ def _run_one(context, env, scenario, n, rates, counts, args) -> list[dict]:
            "-p", "initial_state:=[" + ",".join(repr(float(v)) for v in scenario.prior_mean) + "]",
            "-p", "initial_std:=[" + ",".join(repr(float(v)) for v in prior_std) + "]",
            "-p", f"initial_stamp:={base * 1e-9!r}", "-p", "max_measurement_rate:=0.0",
-           "-p", "max_published_particles:=0", "--log-level", "warn"]
+           "-p", "max_published_particles:=0", "-p", "diagnostics_period:=0.5", "--log-level", "warn"]
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     node = rclpy.create_node("gpf_latency_bench", context=context)
     bench = _Bench(context, node)
+    bench.imu_per_measurement = args.imu_per_measurement
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     stop = threading.Event()
@@ -195,6 +218,10 @@ def _run_one(context, env, scenario, n, rates, counts, args) -> list[dict]:
             if label != "warmup":
                 row = {"filter": args.filter, "particles": n, "rate_hz": rate}
                 row.update(_stats(bench, [s for s, _ in items]))
+                if args.imu_per_measurement:  # the counters so far (cumulative over the rates)
+                    row.update(imu_per_measurement=args.imu_per_measurement,
+                               imu_accepted=int(bench.diagnostics.get("accepted imu", -1)),
+                               late_imu_applied=int(bench.diagnostics.get("late IMU samples applied", -1)))
                 results.append(row)
     finally:
         stop.set()
@@ -216,7 +243,9 @@ def format_table(results: list[dict]) -> str:
         lines.append(f"{r['filter']:6} {r['particles']:>6} {r['rate_hz']:>6g} {r['sent']:>5} "
                      f"{r['answered']:>8.3f} {r.get('p50_ms', float('nan')):>8.2f} "
                      f"{r.get('p99_ms', float('nan')):>8.2f} {r.get('max_ms', float('nan')):>8.2f} "
-                     f"{r.get('backlog_growth_ms', float('nan')):>9.2f}")
+                     f"{r.get('backlog_growth_ms', float('nan')):>9.2f}"
+                     + (f"   IMU {r['imu_per_measurement']}/measurement: {r['imu_accepted']} accepted, "
+                        f"{r['late_imu_applied']} late" if "imu_per_measurement" in r else ""))
     return "\n".join(lines)
 
 
