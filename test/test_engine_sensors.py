@@ -124,6 +124,8 @@ def test_an_imu_sample_delivered_after_the_measurement_it_precedes_gives_the_in_
     assert swapped.late_imu_count == len(rae) and in_order.late_imu_count == 0
     for engine in (swapped, in_order):  # the IMU catches up with the filter's time: the last one is applied
         assert engine.imu(rae[-1][0], np.zeros(3), None) == (True, "")
+    # while samples come late the newest input keeps a snapshot: each re-applies that input only
+    assert swapped.replayed_count == len(rae)
     np.testing.assert_array_equal(swapped.mean, in_order.mean)
     np.testing.assert_array_equal(swapped.cov, in_order.cov)
     _run(swapped, sensors, [(rae[-1][0] + 3 * S, "rae", rae[-1][2])])

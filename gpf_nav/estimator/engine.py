@@ -63,6 +63,10 @@ from gpf_nav.sensors import ModelSensor, innovation_distance
 from gpf_nav.estimator.input_checks import Counters, RateLimiter, check_timing
 
 NS = 1_000_000_000
+LATE_IMU_MEMORY = 50
+"""Inputs after a late IMU sample during which the newest input keeps a snapshot too
+(:mod:`gpf_nav.estimator.history`): a measurement whose IMU sample comes after it then re-applies one input,
+not up to ``SNAPSHOT_EVERY`` of them, for a copy of the filter per input (a sixth of an update)."""
 IMU_SAMPLES = 4096
 """IMU samples kept (the zero-order hold looks them up, also when re-applying the history)."""
 LEVEL_RANK = {"OK": 0, "WARN": 1, "FAULT": 2}
@@ -205,6 +209,7 @@ class EstimatorEngine:
         self.late_count = 0                   # late measurements fused at their stamp
         self.late_imu_count = 0               # IMU samples that came after a measurement that needed them
         self._late_imu_ns: int | None = None  # the earliest of them not yet re-applied
+        self._late_imu_recent = 0             # inputs to come that keep an extra snapshot (LATE_IMU_MEMORY)
         self.replayed_count = 0               # inputs re-applied after them
         self.snapshot_failures = 0            # filter copies that failed (the history was emptied)
         self._init_buffer: list[tuple[int, np.ndarray]] = []
@@ -327,9 +332,13 @@ class EstimatorEngine:
         """Predict to ``stamp_ns`` and update with ``y``: ``""`` when updated, ``"innovation_gate"`` when
         the gate refused it (predicted only), ``"filter_error"`` after a recovery."""
         keep = self.history.length_ns > 0
-        before = self._snapshot() if keep and self.history.wants_snapshot() else None
+        periodic = self.history.wants_snapshot()
+        extra = not periodic and self._late_imu_recent > 0  # the newest input's, while IMU samples come late
+        self._late_imu_recent = max(0, self._late_imu_recent - 1)
+        before = self._snapshot() if keep and (periodic or extra) else None
         keep = keep and (before is not None or len(self.history) > 0)  # (a failed copy emptied the history)
-        entry = Entry(stamp_ns, stream, y, sensor, before, self.t_ns, dict(self._streaks))
+        entry = Entry(stamp_ns, stream, y, sensor, before, self.t_ns, dict(self._streaks),
+                      extra=extra and before is not None)
         try:
             self._predict_to(stamp_ns)
             gated = self._gated(stream, sensor, y)
@@ -457,6 +466,7 @@ class EstimatorEngine:
         if split is None or self._input_at(self.history.entries[split[0]].t_ns) is not u:
             return
         self.late_imu_count += 1
+        self._late_imu_recent = LATE_IMU_MEMORY
         if self._late_imu_ns is None:  # (samples come in stamp order: the first is the earliest)
             self._late_imu_ns = stamp_ns
 

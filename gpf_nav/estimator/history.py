@@ -8,6 +8,11 @@ between, applying the late one, and re-applying the inputs that came after
 so it holds everything an update depends on (particles, weights, the generator's state, gate streaks);
 re-application therefore gives bit for bit the estimate of in-order delivery. No ROS here.
 
+While IMU samples come late (an IMU sample delivered after the measurement it precedes, re-applied from
+the last snapshot before that measurement) the engine also keeps a snapshot of the newest input, dropped when
+the next one comes (``extra``): the re-application then starts at that input instead of up to
+:data:`SNAPSHOT_EVERY` - 1 inputs earlier.
+
 Memory: one filter copy per :data:`SNAPSHOT_EVERY` inputs of the last ``length_ns`` (for the lunar GPF with
 N particles about ``N * 9 * 8`` bytes of particles plus their weights and caches). Cost: a copy every
 :data:`SNAPSHOT_EVERY` inputs (0.3 ms for the default GPF at N = 500, a tenth of its step); restoring is
@@ -29,7 +34,8 @@ SNAPSHOT_EVERY = 4
 class Entry:
     """One input the filter took: ``y`` ``(m,)`` stamped ``t_ns`` of ``stream`` with ``sensor`` (None:
     the model's own), and ``before``: the filter state it was applied to (None: not kept, see
-    :data:`SNAPSHOT_EVERY`), at ``before_ns``, with the engine's per-stream gate streaks then."""
+    :data:`SNAPSHOT_EVERY`), at ``before_ns``, with the engine's per-stream gate streaks then; ``extra``: a
+    snapshot kept only while the input is the newest."""
 
     t_ns: int
     stream: str
@@ -38,6 +44,7 @@ class Entry:
     before: object
     before_ns: int
     streaks: dict
+    extra: bool = False
 
 
 class History:
@@ -59,13 +66,16 @@ class History:
 
     def wants_snapshot(self) -> bool:
         """Whether the next input should keep a snapshot: when none of the last :data:`SNAPSHOT_EVERY` - 1
-        kept inputs has one."""
+        kept inputs has one (an ``extra`` one does not count)."""
         recent = self.entries[-(SNAPSHOT_EVERY - 1):] if SNAPSHOT_EVERY > 1 else []
-        return all(e.before is None for e in recent)
+        return all(e.before is None or e.extra for e in recent)
 
     def append(self, entry: Entry) -> None:
         """Add an input stamped at or after every other one, then drop those out of the window (but the
-        last one with a snapshot before the first one kept, which restoring it needs)."""
+        last one with a snapshot before the first one kept, which restoring it needs). The previous input's
+        ``extra`` snapshot is dropped."""
+        if self.entries and self.entries[-1].extra:
+            self.entries[-1].before, self.entries[-1].extra = None, False
         self.entries.append(entry)
         horizon = entry.t_ns - self.length_ns
         drop = 0
