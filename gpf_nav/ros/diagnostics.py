@@ -88,7 +88,7 @@ def filter_status(engine: EstimatorEngine, now_ns: int | None, thresholds: Thres
         level = max(level, WARN)
         problems.append(f"no IMU sample for {imu_age:.1f} s: predicting without input")
     report = engine.integrity()
-    if report is not None and report.level != "OK":
+    if report.level != "OK":
         level = max(level, INTEGRITY_LEVEL[report.level])
         problems.append(_integrity_problem(report))
     observability = engine.observability()
@@ -137,8 +137,7 @@ def filter_status(engine: EstimatorEngine, now_ns: int | None, thresholds: Thres
     for reason in REASONS:
         values.append((f"rejected {reason}", str(c.rejected[reason])))
     values.extend(stream_values(engine))
-    if report is not None:
-        values.extend(integrity_values(report, filter_name))
+    values.extend(integrity_values(report, filter_name))
     values.extend(observability_values(observability))
     values.extend(consistency_values(consistency))
     return level, message, values
