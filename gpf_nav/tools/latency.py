@@ -66,9 +66,10 @@ def _parser() -> CommandParser:
 
 
 class _Bench:
-    """A node that publishes measurements and records reply latencies."""
+    """A node that publishes measurements (each after ``imu_per_measurement`` IMU samples) and records reply
+    latencies and the estimator's diagnostics."""
 
-    def __init__(self, context, node):
+    def __init__(self, context, node, imu_per_measurement: int = 0):
         from geometry_msgs.msg import Vector3Stamped
         from nav_msgs.msg import Odometry
         from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -84,7 +85,7 @@ class _Bench:
         node.create_subscription(Odometry, "odometry/filtered", self._on_odom, 100)
         node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
         self.diagnostics: dict[str, str] = {}
-        self.imu_per_measurement = 0
+        self.imu_per_measurement = imu_per_measurement
         self._imu = Imu()
         self._imu.header.frame_id = "base_link"
         self._imu.orientation.w = 1.0
@@ -188,8 +189,7 @@ def _run_one(context, env, scenario, n, rates, counts, args) -> list[dict]:
            "-p", "max_published_particles:=0", "-p", "diagnostics_period:=0.5", "--log-level", "warn"]
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     node = rclpy.create_node("gpf_latency_bench", context=context)
-    bench = _Bench(context, node)
-    bench.imu_per_measurement = args.imu_per_measurement
+    bench = _Bench(context, node, args.imu_per_measurement)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     stop = threading.Event()
