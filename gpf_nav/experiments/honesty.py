@@ -30,7 +30,7 @@ from pathlib import Path
 from gpf_nav.arguments import CommandParser, positive_int
 from gpf_nav.experiments.montecarlo import base_config, git_commit, parse_filters, run_metadata, write_json
 from gpf_nav.experiments.runner import DEFAULT_PARTICLES, NEES_BOUND, REPORT_AFTER
-from gpf_nav.experiments.stress import BEYOND, _num, stress
+from gpf_nav.experiments.stress import BEYOND, GRAVITY, _num, stress
 
 SCHEMA = "gpf_nav.honesty/1"
 DEFAULT_FILTERS = "gpf,gpf-single,ekf-comp-gated,ekf,gpf-paper"
@@ -49,7 +49,7 @@ UNDETERMINED = {
     "partial-force": ("no azimuth, unmodelled 0.1 m/s^2 inertial force",
                       {"case": "partial", "disturbance": INERTIAL_FORCE}),
 }
-CONDITIONS = {**CONTROLS, **UNDETERMINED}
+CONDITIONS = {**CONTROLS, **UNDETERMINED, **GRAVITY}
 
 
 def markdown(report: dict) -> str:

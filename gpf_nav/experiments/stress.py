@@ -71,7 +71,21 @@ BEYOND = {
                        {"measurement_noise_scale": 10.0, "outlier_probability": 0.03, "outlier_size": 20.0}),
 }
 """Conditions beyond the envelope the default was built for (combinations), run only when named."""
-KNOWN = {**CONDITIONS, **BEYOND}
+THRUST_DRIFT = (0.005, 2.0 * math.pi / 2400.0)
+"""``thrust-drift``: an unmodelled 5 mm/s^2 thrust whose direction turns once in the orbit plane over the
+2400 s descent, m/s^2 and rad/s."""
+GRAVITY = {
+    "j2-full": ("J2 unmodelled, full case", {"truth_gravity": "j2"}),
+    "j2-partial": ("J2 unmodelled, no azimuth", {"truth_gravity": "j2", "case": "partial"}),
+    "j2-modelled": ("J2 in the truth and the model, full case", {"truth_gravity": "j2", "filter_gravity": "j2"}),
+    "degree4-j2": ("degree-4 field, J2-modelled filter, full case",
+                   {"truth_gravity": "degree4", "filter_gravity": "j2"}),
+    "thrust-drift": ("unmodelled 5 mm/s^2 thrust turning once in the orbit plane",
+                     {"thrust": THRUST_DRIFT[0], "thrust_known": False, "thrust_drift_rate": THRUST_DRIFT[1]}),
+}
+"""The Moon's own gravity field and slowly varying forces, small against the 9 % mismatch (``J2`` adds
+about 4.6e-4 m/s^2 at 100 km; :mod:`gpf_nav.models.gravity`), run only when named."""
+KNOWN = {**CONDITIONS, **BEYOND, **GRAVITY}
 
 
 def prior_condition(scale: float) -> tuple[str, tuple[str, dict]]:

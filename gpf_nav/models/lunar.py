@@ -2,8 +2,9 @@
 
 State ``x = [r, v]`` (``(N, 6)``) in a Moon-centred inertial frame. Nominal drift: two-body gravity
 ``dv/dt = -mu r / |r|^3 + u`` with ``u`` an optional IMU specific force already rotated to the world
-frame. ``mu_scale`` multiplies ``mu``: the filters use 1, the truth ``1 + epsilon`` (9 % by default), the
-paper's structural mismatch. Measurements are range, azimuth and elevation of the vehicle seen from a
+frame, plus, when the model is given one, a gravity field's perturbation ``a_p(r, t)``
+(:mod:`gpf_nav.models.gravity`: J2, the zonal terms, a degree-4 field). ``mu_scale`` multiplies ``mu``:
+the filters use 1, the truth ``1 + epsilon`` (9 % by default), the paper's structural mismatch. Measurements are range, azimuth and elevation of the vehicle seen from a
 station (default: the Moon's centre), azimuth ``atan2(dy, dx)`` and elevation ``atan2(dz, |(dx, dy)|)``.
 Process noise is white acceleration of spectral density ``accel_noise_density**2`` (m^2/s^3).
 """
@@ -14,6 +15,7 @@ import math
 import numpy as np
 
 from gpf_nav.kernels import orbit
+from gpf_nav.models.gravity import GravityField
 from gpf_nav.models.state_space import StateSpaceModel
 
 MU_MOON = 4.9028e12
@@ -39,6 +41,9 @@ class LunarDescentModel(StateSpaceModel):
         angle_noise_std: azimuth and elevation noise standard deviation, rad.
         accel_noise_density: process-noise acceleration density, m/s^(3/2).
         max_step: longest integration sub-step of :meth:`transition`, s.
+        gravity: the field's perturbation beyond the point mass (None: the point mass). Its flow is
+            integrated with numpy (:meth:`_field_leapfrog`); the Jacobians keep the point mass's gravity
+            gradient, which the field changes by a relative ``J2 (R / r)^2``, about 2e-4.
     """
 
     state_dim = 6
@@ -51,7 +56,8 @@ class LunarDescentModel(StateSpaceModel):
 
     def __init__(self, mu: float = MU_MOON, mu_scale: float = 1.0, station=(0.0, 0.0, 0.0),
                  range_noise_std: float = 30.0, angle_noise_std: float = math.radians(0.03),
-                 accel_noise_density: float = 1e-3, max_step: float = 10.0):
+                 accel_noise_density: float = 1e-3, max_step: float = 10.0,
+                 gravity: GravityField | None = None):
         if range_noise_std <= 0 or angle_noise_std <= 0 or accel_noise_density < 0 or max_step <= 0:
             raise ValueError("noise standard deviations and max_step must be positive")
         self.gm = float(mu) * float(mu_scale)
@@ -60,17 +66,20 @@ class LunarDescentModel(StateSpaceModel):
         self.angle_noise_std = float(angle_noise_std)
         self.accel_noise_density = float(accel_noise_density)
         self.max_step = float(max_step)
+        self.gravity = gravity
         self._R = np.diag([self.range_noise_std ** 2, self.angle_noise_std ** 2, self.angle_noise_std ** 2])
 
     # --- dynamics -----------------------------------------------------------------------------------
     # Internally the model works on transposed blocks ``(3, N)``: rows are contiguous when the filter
     # stores particles as ``(n, N)`` and passes the ``(N, n)`` transpose.
-    def _acceleration(self, r: np.ndarray, u) -> np.ndarray:
-        """Gravity plus specific force ``(3, N)`` at positions ``(3, N)``."""
+    def _acceleration(self, r: np.ndarray, u, t: float = 0.0) -> np.ndarray:
+        """Gravity plus specific force ``(3, N)`` at positions ``(3, N)`` at time ``t``."""
         r2 = np.einsum("ij,ij->j", r, r)
         np.maximum(r2, _MIN_RANGE_SQ, out=r2)
         k = -self.gm / (r2 * np.sqrt(r2))
         a = r * k
+        if self.gravity is not None:
+            a += self.gravity.acceleration(r, t)
         if u is not None:
             a += u.T if u.ndim == 2 else u[:, None]
         return a
@@ -82,17 +91,38 @@ class LunarDescentModel(StateSpaceModel):
 
     def drift(self, x, t=0.0, u=None):
         xt = x.T
-        return np.concatenate([xt[3:], self._acceleration(xt[:3], _as_input(u))]).T
+        return np.concatenate([xt[3:], self._acceleration(xt[:3], _as_input(u), t)]).T
 
     def transition(self, x, dt, t=0.0, u=None):
         """Kick-drift-kick leapfrog (second order, symplectic) in :meth:`_substeps` sub-steps
-        (:func:`gpf_nav.kernels.orbit.leapfrog`)."""
+        (:func:`gpf_nav.kernels.orbit.leapfrog`; with a gravity field, :meth:`_field_leapfrog`)."""
+        if self.gravity is not None:
+            return self._field_leapfrog(x, dt, t, u)
         steps = self._substeps(dt)
         return orbit.leapfrog(_particle_last(x), self.gm, dt / steps, steps, _input_columns(u)).T
 
+    def _field_leapfrog(self, x: np.ndarray, dt: float, t: float, u) -> np.ndarray:
+        """The leapfrog of :meth:`transition` with the gravity field's perturbation, ``(N, 6) -> (N, 6)``,
+        the field taken at each sub-step's time (a tesseral field turns with the Moon)."""
+        steps = self._substeps(dt)
+        h = dt / steps
+        u = _as_input(u)
+        xt = np.array(np.asarray(x, dtype=float).T)
+        r, v = xt[:3], xt[3:]
+        a = self._acceleration(r, u, t)
+        for k in range(steps):
+            v += 0.5 * h * a
+            r += h * v
+            a = self._acceleration(r, u, t + (k + 1) * h)
+            v += 0.5 * h * a
+        return xt.T
+
     def pushed_transition(self, x, dt, t, u, a, velocity_gain, position_gain, driven, integrated, out):
         """The compensated transition's flow and push in one pass (:func:`gpf_nav.kernels.orbit.pushed_leapfrog`;
-        the numbers of :meth:`transition` and :meth:`compensation_frame` in turn)."""
+        the numbers of :meth:`transition` and :meth:`compensation_frame` in turn). With a gravity field the
+        compensation makes the two calls (False)."""
+        if self.gravity is not None:
+            return False
         steps = self._substeps(dt)
         orbit.pushed_leapfrog(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(a, dtype=float),
                               self.gm, dt / steps, steps, _input_columns(u), driven, integrated, velocity_gain,
@@ -107,13 +137,18 @@ class LunarDescentModel(StateSpaceModel):
 
     def transition_chain(self, x, dt, t, u):
         """:meth:`transition` ``K`` times in turn in one kernel call (:func:`gpf_nav.kernels.orbit.leapfrog_chain`;
-        the flow does not depend on ``t``)."""
+        the point mass's flow does not depend on ``t``; with a gravity field, the calls in turn)."""
+        if self.gravity is not None:
+            return super().transition_chain(x, dt, t, u)
         steps, h = self._chain_steps(dt)
         return orbit.leapfrog_chain(np.asarray(x, dtype=float), self.gm, h, steps, _input_matrix(u)).T
 
     def pushed_transition_chain(self, x, a, dt, t, u, velocity_gain, position_gain, decay, driven, integrated):
         """The compensated transition ``K`` times in turn in one kernel call
-        (:func:`gpf_nav.kernels.orbit.pushed_leapfrog_chain`)."""
+        (:func:`gpf_nav.kernels.orbit.pushed_leapfrog_chain`); with a gravity field, None (the compensation
+        makes the calls)."""
+        if self.gravity is not None:
+            return None
         steps, h = self._chain_steps(dt)
         return orbit.pushed_leapfrog_chain(np.asarray(x, dtype=float), np.asarray(a, dtype=float), self.gm, h,
                                            steps, _input_matrix(u), driven, integrated,

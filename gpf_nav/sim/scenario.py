@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gpf_nav.models.gravity import FIELDS, GravityField, make_field
 from gpf_nav.models.state_space import wrap_angle
 from gpf_nav.models.lunar import MOON_RADIUS, MU_MOON, LunarDescentModel
 
@@ -75,6 +76,12 @@ class ScenarioConfig:
         disturbance: a constant acceleration ``(3,)`` in the world frame, m/s^2, added to the truth's
             gravity and never given to the filters (nor to the IMU, like a gravity-field error): an
             unmodelled force fixed in inertial space, which turns in the orbit frame.
+        truth_gravity: the truth's gravity field beyond the point mass (:data:`gpf_nav.models.gravity.FIELDS`:
+            ``point``, ``j2``, ``zonal`` for J2-J4, ``degree4`` for DE430's field through degree 4).
+        filter_gravity: the field of the filters' model (the same names); it may differ from the truth's.
+        thrust_drift_rate: with a ``thrust``, the rate, rad/s, at which its direction turns in the orbit
+            plane from retrograde towards the radial: ``-cos(w t) v/|v| + sin(w t) n``, ``n`` the unit
+            component of ``r`` normal to ``v`` (0: retrograde throughout).
     """
 
     epsilon: float = 0.09
@@ -101,10 +108,18 @@ class ScenarioConfig:
     thrust: float | None = None
     thrust_known: bool = True
     disturbance: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    truth_gravity: str = "point"
+    filter_gravity: str = "point"
+    thrust_drift_rate: float = 0.0
 
     def __post_init__(self):
         if self.case not in CASES:
             raise ValueError(f"case must be one of {CASES}, got {self.case!r}")
+        for name in ("truth_gravity", "filter_gravity"):
+            if getattr(self, name) not in FIELDS:
+                raise ValueError(f"{name} must be one of {FIELDS}, got {getattr(self, name)!r}")
+        if not math.isfinite(self.thrust_drift_rate):
+            raise ValueError("thrust_drift_rate must be finite")
         if self.orbit_design not in ORBIT_DESIGNS:
             raise ValueError(f"orbit_design must be one of {ORBIT_DESIGNS}, got {self.orbit_design!r}")
         if not 0.0 <= self.dropout_probability <= 1.0:
@@ -207,20 +222,22 @@ def _parse_scalar(s: str):
 
 
 def filter_model(config: ScenarioConfig) -> LunarDescentModel:
-    """The model the filters run on: gravity ``mu``, density ``filter_accel_noise_density``, true ``R``."""
-    return _model(config, 1.0, config.filter_accel_noise_density)
+    """The model the filters run on: gravity ``mu`` with the field ``filter_gravity``, density
+    ``filter_accel_noise_density``, true ``R``."""
+    return _model(config, 1.0, config.filter_accel_noise_density, config.filter_gravity)
 
 
 def truth_model(config: ScenarioConfig) -> LunarDescentModel:
-    """The truth model: gravity ``mu (1 + epsilon)``, density ``truth_accel_noise_density``."""
-    return _model(config, 1.0 + config.epsilon, config.truth_accel_noise_density)
+    """The truth model: gravity ``mu (1 + epsilon)`` with the field ``truth_gravity``, density
+    ``truth_accel_noise_density``."""
+    return _model(config, 1.0 + config.epsilon, config.truth_accel_noise_density, config.truth_gravity)
 
 
-def _model(config: ScenarioConfig, mu_scale: float, density: float) -> LunarDescentModel:
+def _model(config: ScenarioConfig, mu_scale: float, density: float, field: str) -> LunarDescentModel:
     return LunarDescentModel(mu=MU_MOON, mu_scale=mu_scale, station=config.station,
                              range_noise_std=config.range_noise_std * config.measurement_noise_scale,
                              angle_noise_std=config.angle_noise_std * config.measurement_noise_scale,
-                             accel_noise_density=density)
+                             accel_noise_density=density, gravity=make_field(field, MU_MOON * mu_scale))
 
 
 @dataclass
@@ -296,7 +313,8 @@ def generate(config: ScenarioConfig, seed: int) -> Scenario:
     noise = truth_rng.standard_normal((steps, 6)) @ sqrt_q.T
     substeps = max(1, math.ceil(dt / config.truth_step - 1e-9))
     truth, force = _integrate_truth(initial_state(config), steps, dt, substeps, model.gm,
-                                    config.thrust, noise, config.disturbance)
+                                    config.thrust, noise, config.disturbance, model.gravity,
+                                    config.thrust_drift_rate)
     altitude = np.linalg.norm(truth[:, :3], axis=1) - MOON_RADIUS
     if altitude.min() < 0.0:
         hit = int(np.argmax(altitude < 0.0)) * dt
@@ -307,10 +325,12 @@ def generate(config: ScenarioConfig, seed: int) -> Scenario:
 
 
 def _integrate_truth(x0: np.ndarray, steps: int, dt: float, substeps: int, gm: float,
-                     thrust: float | None, noise: np.ndarray,
-                     disturbance=(0.0, 0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
-    """RK4 two-body flow with held specific force and the constant ``disturbance`` acceleration, plus
-    ``noise[k]`` ``(K, 6)`` added after each step.
+                     thrust: float | None, noise: np.ndarray, disturbance=(0.0, 0.0, 0.0),
+                     field: GravityField | None = None, thrust_drift_rate: float = 0.0
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """RK4 two-body flow with held specific force, the constant ``disturbance`` acceleration and the
+    gravity ``field``'s perturbation (None: none), plus ``noise[k]`` ``(K, 6)`` added after each step;
+    ``truth[0]`` is at ``t = 0``.
 
     Scalar Python arithmetic: a single 6-state is far faster this way than with numpy calls.
     Returns truth ``(K + 1, 6)`` and specific force ``(K, 3)``.
@@ -323,24 +343,28 @@ def _integrate_truth(x0: np.ndarray, steps: int, dt: float, substeps: int, gm: f
 
     dx, dy, dz = (float(a) for a in disturbance)
 
-    def acc(px, py, pz):
+    def acc(px, py, pz, t):
         k = -gm / (px * px + py * py + pz * pz) ** 1.5
-        return k * px + ux + dx, k * py + uy + dy, k * pz + uz + dz
+        ax, ay, az = k * px + ux + dx, k * py + uy + dy, k * pz + uz + dz
+        if field is None:
+            return ax, ay, az
+        fx, fy, fz = field.acceleration(np.array([[px], [py], [pz]]), t)[:, 0].tolist()
+        return ax + fx, ay + fy, az + fz
 
     for step in range(steps):
         ux = uy = uz = 0.0
         if thrust:
-            speed = math.sqrt(vx * vx + vy * vy + vz * vz)
-            ux, uy, uz = -thrust * vx / speed, -thrust * vy / speed, -thrust * vz / speed
+            ux, uy, uz = _thrust(thrust, thrust_drift_rate * step * dt, (x, y, z), (vx, vy, vz))
             force[step] = ux, uy, uz
-        for _ in range(substeps):
-            a1x, a1y, a1z = acc(x, y, z)
+        for sub in range(substeps):
+            t = (step * substeps + sub) * h
+            a1x, a1y, a1z = acc(x, y, z, t)
             b2x, b2y, b2z = vx + 0.5 * h * a1x, vy + 0.5 * h * a1y, vz + 0.5 * h * a1z
-            a2x, a2y, a2z = acc(x + 0.5 * h * vx, y + 0.5 * h * vy, z + 0.5 * h * vz)
+            a2x, a2y, a2z = acc(x + 0.5 * h * vx, y + 0.5 * h * vy, z + 0.5 * h * vz, t + 0.5 * h)
             b3x, b3y, b3z = vx + 0.5 * h * a2x, vy + 0.5 * h * a2y, vz + 0.5 * h * a2z
-            a3x, a3y, a3z = acc(x + 0.5 * h * b2x, y + 0.5 * h * b2y, z + 0.5 * h * b2z)
+            a3x, a3y, a3z = acc(x + 0.5 * h * b2x, y + 0.5 * h * b2y, z + 0.5 * h * b2z, t + 0.5 * h)
             b4x, b4y, b4z = vx + h * a3x, vy + h * a3y, vz + h * a3z
-            a4x, a4y, a4z = acc(x + h * b3x, y + h * b3y, z + h * b3z)
+            a4x, a4y, a4z = acc(x + h * b3x, y + h * b3y, z + h * b3z, t + h)
             x += h / 6.0 * (vx + 2.0 * (b2x + b3x) + b4x)
             y += h / 6.0 * (vy + 2.0 * (b2y + b3y) + b4y)
             z += h / 6.0 * (vz + 2.0 * (b2z + b3z) + b4z)
@@ -352,6 +376,22 @@ def _integrate_truth(x0: np.ndarray, steps: int, dt: float, substeps: int, gm: f
         vx, vy, vz = vx + w[3], vy + w[4], vz + w[5]
         truth[step + 1] = x, y, z, vx, vy, vz
     return truth, force
+
+
+def _thrust(magnitude: float, angle: float, r: tuple, v: tuple) -> tuple[float, float, float]:
+    """The specific force of ``magnitude`` turned by ``angle`` in the orbit plane from retrograde
+    (``-v/|v|``) towards the unit component of ``r`` normal to ``v`` (:class:`ScenarioConfig`,
+    ``thrust_drift_rate``)."""
+    vx, vy, vz = v
+    speed = math.sqrt(vx * vx + vy * vy + vz * vz)
+    if angle == 0.0:
+        return -magnitude * vx / speed, -magnitude * vy / speed, -magnitude * vz / speed
+    back = [-c / speed for c in v]
+    along = sum(a * -b for a, b in zip(r, back))  # r . v/|v|
+    normal = [a + along * b for a, b in zip(r, back)]  # r minus its component along v
+    size = math.sqrt(sum(c * c for c in normal))
+    cos, sin = math.cos(angle), math.sin(angle)
+    return tuple(magnitude * (cos * b + sin * n / size) for b, n in zip(back, normal))
 
 
 def _finish(config: ScenarioConfig, times: np.ndarray, truth: np.ndarray, force: np.ndarray,
