@@ -4,8 +4,8 @@ A :class:`GravityField` is the perturbation ``a_p(r, t)`` that a non-spherical M
 term ``-mu r / |r|^3``; the lunar model (:class:`~gpf_nav.models.lunar.LunarDescentModel`) and the
 simulator's truth (:mod:`gpf_nav.sim.scenario`) add it to their flows. The coefficients are given in
 the Moon-fixed (principal-axis) frame, whose z axis is the inertial frame's (the pole) and which turns
-about it at ``rotation_rate`` from the angle ``rotation_angle`` at ``t = 0``; a zonal field does not
-depend on that angle, so its flow does not depend on ``t``.
+about it at ``rotation_rate``, its x axis the inertial x axis at the time ``epoch``; a zonal field does
+not depend on that angle, so its flow does not depend on ``t``.
 
 The acceleration is the Cunningham recursion of the unnormalised solid harmonics in Cartesian
 coordinates, compiled (:mod:`gpf_nav.kernels.harmonics`); :meth:`GravityField.potential`, the textbook
@@ -58,7 +58,8 @@ class GravityField:
         C, S: ``(degree + 1, degree + 1)`` unnormalised coefficients ``C_nm``, ``S_nm`` (rows ``n``,
             columns ``m``); degrees 0 and 1 are ignored (the central term is the model's own).
         rotation_rate: the Moon-fixed frame's rotation about the inertial z axis, rad/s.
-        rotation_angle: its angle at ``t = 0``, rad.
+        epoch: the time at which the Moon-fixed frame's x axis is the inertial x axis, s (the time scale
+            of the ``t`` the field is called with).
         name: the field's name (:data:`FIELDS`).
     """
 
@@ -67,7 +68,7 @@ class GravityField:
     C: np.ndarray
     S: np.ndarray
     rotation_rate: float = MOON_ROTATION_RATE
-    rotation_angle: float = 0.0
+    epoch: float = 0.0
     name: str = ""
     degree: int = field(init=False)
     zonal: bool = field(init=False)
@@ -97,7 +98,7 @@ class GravityField:
         return np.stack([c * a[0] - s * a[1], s * a[0] + c * a[1], a[2]])
 
     def _rotation(self, t: float) -> tuple[float, float]:
-        angle = self.rotation_angle + self.rotation_rate * float(t)
+        angle = self.rotation_rate * (float(t) - self.epoch)
         return math.cos(angle), math.sin(angle)
 
     def _body_acceleration(self, r: np.ndarray) -> np.ndarray:
@@ -139,7 +140,7 @@ def zonal_field(gm: float, zonal: dict[int, float], radius: float = FIELD_RADIUS
     return GravityField(gm, radius, C, np.zeros_like(C), name=name)
 
 
-def harmonic_field(gm: float, degree: int, rotation_angle: float = 0.0,
+def harmonic_field(gm: float, degree: int, epoch: float = 0.0,
                    rotation_rate: float = MOON_ROTATION_RATE) -> GravityField:
     """DE430's lunar field through ``degree`` (2 to 4), zonal and tesseral terms."""
     if not 2 <= degree <= 4:
@@ -152,7 +153,7 @@ def harmonic_field(gm: float, degree: int, rotation_angle: float = 0.0,
     for (n, m), (c, s) in DE430_TESSERAL.items():
         if n <= degree:
             C[n, m], S[n, m] = c, s
-    return GravityField(gm, FIELD_RADIUS, C, S, rotation_rate, rotation_angle, name=f"degree{degree}")
+    return GravityField(gm, FIELD_RADIUS, C, S, rotation_rate, epoch, name=f"degree{degree}")
 
 
 FIELDS = ("point", "j2", "zonal", "degree4")
@@ -160,8 +161,9 @@ FIELDS = ("point", "j2", "zonal", "degree4")
 its zonal terms J2-J4, and its full field through degree 4."""
 
 
-def make_field(name: str, gm: float, rotation_angle: float = 0.0) -> GravityField | None:
-    """The field ``name`` (:data:`FIELDS`) for the gravitational parameter ``gm``; None for the point mass."""
+def make_field(name: str, gm: float, epoch: float = 0.0) -> GravityField | None:
+    """The field ``name`` (:data:`FIELDS`) for the gravitational parameter ``gm`` (``epoch``: the Moon-fixed
+    frame's, :class:`GravityField`); None for the point mass."""
     if name == "point":
         return None
     if name == "j2":
@@ -169,5 +171,5 @@ def make_field(name: str, gm: float, rotation_angle: float = 0.0) -> GravityFiel
     if name == "zonal":
         return zonal_field(gm, DE430_ZONAL, name="zonal")
     if name == "degree4":
-        return harmonic_field(gm, 4, rotation_angle)
+        return harmonic_field(gm, 4, epoch)
     raise ValueError(f"unknown gravity field {name!r}; known: {', '.join(FIELDS)}")
