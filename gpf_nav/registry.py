@@ -148,7 +148,7 @@ for _entry in (
     FilterEntry("gpf", "GPF navigation (default)",
                 lambda model, n_particles, seed, **options: _gpf(
                     model, n_particles, seed, **{**NAVIGATION_GPF, **options}),
-                "gpf", GPF_OPTIONS | {"switch_time"}, "navigation", node=True, aliases=("gpf-mm",),
+                "gpf", GPF_OPTIONS | {"switch_time", "compensation_scales"}, "navigation", node=True, aliases=("gpf-mm",),
                 description="the multiple-model GPF: two navigation-grade GPFs (cloud metric, exact weights, "
                             "tempering, the update flattened along the flow), on the nominal and on the "
                             "compensated model; the node's default"),
@@ -181,7 +181,8 @@ for _entry in (
                 GPF_OPTIONS | {"nominal_prior"}, node=True,
                 description="one navigation-grade GPF on the compensated model, averaged with the nominal "
                             "hypothesis by Savage-Dickey (the default before the multiple model)"),
-    FilterEntry("gpf-mean", "GPF navigation, mean-linearised update", _gpf, "gpf", GPF_OPTIONS | {"switch_time"},
+    FilterEntry("gpf-mean", "GPF navigation, mean-linearised update", _gpf, "gpf",
+                GPF_OPTIONS | {"switch_time", "compensation_scales"},
                 description="gpf with the measurement linearised once at each member's mean (linearization "
                             "mean: the default before issue 23; it narrows what the data cannot see)"),
     FilterEntry("gpf-qmetric", "GPF Q-metric (innovation, corrected, eps=1)",

@@ -20,7 +20,7 @@ def constant_velocity():
     return model
 
 
-def augmented_linear(base):
+def augmented_linear(base, sigma=SIGMA):
     """The augmented model written as a linear-Gaussian model: ``[p, v, a]``, ``v' = a``,
     ``a' = -a / tau + sigma sqrt(2 / tau) w``."""
     A = np.zeros((3, 3))
@@ -29,7 +29,7 @@ def augmented_linear(base):
     A[2, 2] = -1.0 / TAU
     G = np.zeros((3, 2))
     G[:2, :1] = base.G
-    G[2, 1] = SIGMA * np.sqrt(2.0 / TAU)
+    G[2, 1] = sigma * np.sqrt(2.0 / TAU)
     return LinearGaussianModel(A=A, G=G, C=np.hstack([base.C, [[0.0]]]), R=base.R)
 
 
@@ -66,13 +66,13 @@ def test_lunar_compensation_noise_is_finite_for_any_gap():
         assert np.linalg.eigvalsh(Q / np.abs(Q).max()).min() > -1e-9
 
 
-def _kalman_of_augmented(ys, dt, mean, cov):
+def _kalman_of_augmented(ys, dt, mean, cov, sigma=SIGMA):
     base = constant_velocity()
-    linear = augmented_linear(base)
+    linear = augmented_linear(base, sigma)
     m = np.concatenate([mean, [0.0]])
     P = np.zeros((3, 3))
     P[:2, :2] = cov
-    P[2, 2] = SIGMA ** 2
+    P[2, 2] = sigma ** 2
     return kalman(linear, m, P, ys, dt)[-1]
 
 

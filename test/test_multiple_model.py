@@ -1,6 +1,6 @@
-"""The IMM of the nominal and the compensated GPF (gpf_nav.filters.multiple_model) on linear-Gaussian
-problems whose exact answers are known: it picks the model that generated the data and then gives that
-model's Kalman posterior."""
+"""The IMM of the nominal and the compensated GPFs (gpf_nav.filters.multiple_model) on linear-Gaussian
+problems whose exact answers are known: it picks the model that generated the data, at the scale of its
+unmodelled acceleration, and then gives that model's Kalman posterior."""
 import numpy as np
 import pytest
 
@@ -11,9 +11,9 @@ from test_compensation import SIGMA, TAU, _kalman_of_augmented, augmented_linear
 MEAN, COV = np.array([0.0, 1.0]), np.diag([4.0, 1.0])
 
 
-def run(ys, seed=0):
+def run(ys, seed=0, scales=(0.01, 1.0)):
     f = MultipleModelGPF(constant_velocity(), 1000, seed=seed, unmodelled_acceleration_std=SIGMA,
-                         unmodelled_acceleration_time=TAU)
+                         unmodelled_acceleration_time=TAU, compensation_scales=scales)
     f.initialize(MEAN, COV)
     for y in ys:
         f.predict(1.0)
@@ -26,7 +26,7 @@ def test_data_of_the_nominal_model_select_it_and_give_its_posterior():
     ys = simulate(base, MEAN, 150, 1.0, seed=11)
     exact_mean, exact_cov = (v[-1] for v in zip(*kalman(base, MEAN, COV, ys, 1.0)))
     f = run(ys)
-    assert f.model_probabilities[0] > 0.9
+    assert f.model_probabilities[-1] < 0.1  # (a compensation of 0.01 sigma is all but the nominal model)
     np.testing.assert_array_less(np.abs(f.mean - exact_mean), 0.3 * np.sqrt(np.diag(exact_cov)))
     np.testing.assert_allclose(np.diag(f.covariance), np.diag(exact_cov), rtol=0.3)
     assert np.all(np.abs(f.unmodelled_acceleration) < 0.1 * SIGMA)
@@ -36,7 +36,7 @@ def test_an_unmodelled_acceleration_selects_the_compensated_model():
     ys = simulate(augmented_linear(constant_velocity()), np.array([0.0, 1.0, 2.0 * SIGMA]), 150, 1.0, seed=12)
     exact_mean, exact_cov = _kalman_of_augmented(ys, 1.0, MEAN, COV)
     f = run(ys)
-    assert f.model_probabilities[1] > 0.99
+    assert f.model_probabilities[-1] > 0.99
     sd = np.sqrt(np.diag(exact_cov))
     np.testing.assert_array_less(np.abs(f.mean - exact_mean[:2]), 0.3 * sd[:2])
     assert abs(f.unmodelled_acceleration[0] - exact_mean[2]) < 0.3 * sd[2]
@@ -53,6 +53,22 @@ def test_an_unmodelled_acceleration_selects_the_compensated_model():
         nominal.update(y)
         errors.append((nominal.mean[1] - m[1]) / np.sqrt(P[1, 1]))
     assert np.sqrt(np.mean(np.square(errors[len(ys) // 2:]))) > 3.0
+
+
+def test_a_small_acceleration_selects_the_member_of_its_scale():
+    """An acceleration of 0.3 sigma: the member of scale 0.1 (its prior 3 standard deviations away) is more
+    probable than the widest one, which pays for a prior ten times too broad, and than the nominal model,
+    which cannot follow it; the estimate is the small model's Kalman posterior."""
+    small = 0.1 * SIGMA
+    ys = simulate(augmented_linear(constant_velocity(), small), np.array([0.0, 1.0, 3.0 * small]), 150, 1.0,
+                  seed=14)
+    exact_mean, exact_cov = _kalman_of_augmented(ys, 1.0, MEAN, COV, small)
+    f = run(ys, scales=(0.1, 1.0))
+    nominal, scaled, widest = f.model_probabilities
+    assert scaled > max(nominal, widest) and scaled > 0.6
+    sd = np.sqrt(np.diag(exact_cov))
+    np.testing.assert_array_less(np.abs(f.mean - exact_mean[:2]), 0.3 * sd[:2])
+    np.testing.assert_allclose(np.sqrt(np.diag(f.covariance)), sd[:2], rtol=0.3)
 
 
 def test_set_moments_gives_the_cloud_the_requested_moments():
@@ -72,6 +88,9 @@ def test_options_are_checked_and_runs_repeat_bit_for_bit():
         MultipleModelGPF(constant_velocity(), unmodelled_acceleration_std=0.0)
     with pytest.raises(ValueError, match="nominal_prior"):  # the IMM is its own test of the nominal model
         MultipleModelGPF(constant_velocity(), nominal_prior=0.5)
+    for scales in ((), (0.5,), (1.0, 0.1), (0.0, 1.0), (0.1, 0.1, 1.0)):
+        with pytest.raises(ValueError, match="compensation_scales"):
+            MultipleModelGPF(constant_velocity(), compensation_scales=scales)
     assert MultipleModelGPF(constant_velocity()).compensated.model_probabilities is None
     ys = simulate(constant_velocity(), MEAN, 20, 1.0, seed=13)
     np.testing.assert_array_equal(run(ys, seed=5).covariance, run(ys, seed=5).covariance)

@@ -753,7 +753,7 @@ class EstimatorEngine:
         if TEMPERING in f.capabilities:
             out["tempered_updates"] = int(f.tempered_updates)
         if MODEL_PROBABILITIES in f.capabilities:
-            out["compensated_model_probability"] = float(f.model_probabilities[1])
+            out["compensated_model_probability"] = float(1.0 - f.model_probabilities[0])
         if COMPENSATION in f.capabilities:
             acceleration = np.asarray(f.unmodelled_acceleration, dtype=float)
             sigma = np.sqrt(np.clip(np.diag(f.unmodelled_acceleration_covariance), 0.0, None))

@@ -12,7 +12,8 @@ import numpy as np
 from gpf_nav import registry
 from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME
 from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
-from gpf_nav.filters.multiple_model import SWITCH_TIME
+from gpf_nav.filters.multiple_model import COMPENSATION_SCALES, SWITCH_TIME
+from gpf_nav.models.gravity import FIELDS, make_field
 from gpf_nav.models.lunar import LunarDescentModel
 
 FILTERS = registry.node_names()
@@ -27,7 +28,7 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
                 unmodelled_acceleration_time: float = UNMODELLED_ACCELERATION_TIME,
                 nominal_prior: float = NOMINAL_PRIOR, kernel_bandwidth: float = 0.0,
                 flattening_horizon: float = registry.FLATTENING_HORIZON, model_switch_time: float = SWITCH_TIME,
-                collapse_steps: int = 0,
+                compensation_scales=COMPENSATION_SCALES, collapse_steps: int = 0,
                 resampling: str = "systematic", ess_threshold: float = 0.5, compute_costate: bool = True,
                 ukf_alpha: float = 1e-3, ukf_beta: float = 2.0, ukf_kappa: float = 0.0):
     """Build the node's filter ``name`` (one of :data:`FILTERS`, an entry of :mod:`gpf_nav.registry`) on
@@ -49,14 +50,16 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
                                   unmodelled_acceleration_std=unmodelled_acceleration_std,
                                   unmodelled_acceleration_time=unmodelled_acceleration_time,
                                   nominal_prior=nominal_prior, kernel_bandwidth=kernel_bandwidth,
-                                  flattening_horizon=flattening_horizon, model_switch_time=model_switch_time)
+                                  flattening_horizon=flattening_horizon, model_switch_time=model_switch_time,
+                                  compensation_scales=compensation_scales)
     if errors:
         raise ValueError("; ".join(errors))
     seed = None if seed is None or int(seed) < 0 else int(seed)
     options = dict(reference=reference, weighting=weighting, metric=metric,
                    unmodelled_acceleration_std=unmodelled_acceleration_std,
                    unmodelled_acceleration_time=unmodelled_acceleration_time, nominal_prior=nominal_prior,
-                   switch_time=model_switch_time, resampling=resampling, ess_threshold=ess_threshold,
+                   switch_time=model_switch_time, compensation_scales=tuple(compensation_scales),
+                   resampling=resampling, ess_threshold=ess_threshold,
                    collapse_steps=int(collapse_steps), compute_costate=bool(compute_costate),
                    alpha=ukf_alpha, beta=ukf_beta, kappa=ukf_kappa)
     if regularization:
@@ -72,8 +75,8 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
                          ess_threshold, metric="cloud", collapse_steps=0, ukf_alpha=1e-3,
                          ukf_kappa=0.0, state_dim=6, unmodelled_acceleration_std=0.0,
                          unmodelled_acceleration_time=1.0, nominal_prior=0.0, kernel_bandwidth=0.0,
-                         flattening_horizon=0.0,
-                         model_switch_time=SWITCH_TIME) -> list[str]:
+                         flattening_horizon=0.0, model_switch_time=SWITCH_TIME,
+                         compensation_scales=COMPENSATION_SCALES) -> list[str]:
     """Human-readable errors for invalid filter parameters (empty when all are valid)."""
     from gpf_nav import resampling as resamplers
     from gpf_nav.filters.gpf import METRICS, REFERENCES, WEIGHTINGS
@@ -103,6 +106,9 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
                           "positive for gpf-mm (its second model is the compensated one) [m/s^2]")
         if not (math.isfinite(model_switch_time) and model_switch_time > 0.0):
             errors.append(f"parameter 'model_switch_time' = {model_switch_time!r} must be positive [s]")
+        scales = list(compensation_scales)
+        if not scales or scales[-1] != 1.0 or any(not a < b for a, b in zip([0.0] + scales, scales)):
+            errors.append(f"parameter 'compensation_scales' = {scales!r} must increase from above 0 to 1")
     if entry.kind == "gpf":
         if reference not in REFERENCES:
             errors.append(f"parameter 'reference' = {reference!r} must be one of {', '.join(REFERENCES)}")
@@ -133,7 +139,8 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
 
 
 def make_lunar_model(*, mu: float, station, range_noise_std: float, angle_noise_std: float,
-                     accel_noise_density: float, max_step: float) -> LunarDescentModel:
+                     accel_noise_density: float, max_step: float, gravity_field: str = "point",
+                     gravity_epoch: float = 0.0) -> LunarDescentModel:
     """The lunar model from node parameters, refusing invalid values with the parameter's name."""
     errors = []
     if not (math.isfinite(mu) and mu > 0):
@@ -147,8 +154,12 @@ def make_lunar_model(*, mu: float, station, range_noise_std: float, angle_noise_
             errors.append(f"parameter '{key}' = {value!r} must be positive")
     if not (math.isfinite(accel_noise_density) and accel_noise_density >= 0):
         errors.append(f"parameter 'accel_noise_density' = {accel_noise_density!r} must be >= 0")
+    if gravity_field not in FIELDS:
+        errors.append(f"parameter 'gravity_field' = {gravity_field!r} must be one of {', '.join(FIELDS)}")
+    if not math.isfinite(gravity_epoch):
+        errors.append(f"parameter 'gravity_epoch' = {gravity_epoch!r} must be finite [s]")
     if errors:
         raise ValueError("; ".join(errors))
     return LunarDescentModel(mu=mu, station=station, range_noise_std=range_noise_std,
                              angle_noise_std=angle_noise_std, accel_noise_density=accel_noise_density,
-                             max_step=max_step)
+                             max_step=max_step, gravity=make_field(gravity_field, mu, gravity_epoch))

@@ -18,6 +18,8 @@ from gpf_nav import resampling
 from gpf_nav.estimator.factory import FILTERS
 from gpf_nav.estimator.streams import STREAMS, stream_parameters
 from gpf_nav.filters.gpf import METRICS, REFERENCES, WEIGHTINGS
+from gpf_nav.filters.multiple_model import COMPENSATION_SCALES
+from gpf_nav.models.gravity import FIELDS
 from gpf_nav.models.lunar import MU_MOON
 from gpf_nav.registry import FLATTENING_HORIZON
 from gpf_nav.schema import ParameterError, Spec, check, coerce
@@ -44,6 +46,7 @@ ESTIMATOR = [
         Spec("unmodelled_acceleration_std", 0.1, "gpf: stationary std of the estimated unmodelled acceleration; 0 turns the compensation off (gpf-mm needs it positive).", "m/s^2", ">= 0", checked_by=_BY_FILTER),
         Spec("unmodelled_acceleration_time", 1.0e6, "gpf: correlation time of the unmodelled acceleration.", "s", "> 0", checked_by=_BY_FILTER),
         Spec("nominal_prior", 0.5, "gpf-single: prior probability that the model needs no unmodelled acceleration; the estimate averages the two hypotheses; 0 publishes the compensated posterior as it is.", bounds="[0, 1)", checked_by=_BY_FILTER),
+        Spec("compensation_scales", list(COMPENSATION_SCALES), "gpf: the compensated members' acceleration stds as fractions of unmodelled_acceleration_std, increasing to 1: one member per scale beside the nominal one, so that a force from far below to the size of unmodelled_acceleration_std has a member of its size.", bounds="(0, 1]", checked_by=_BY_FILTER),
         Spec("model_switch_time", 2.0e5, "gpf: mean sojourn time of the nominal / compensated model chain.", "s", "> 0", checked_by=_BY_FILTER),
         Spec("kernel_bandwidth", 0.0, "gpf, cloud metric: kernel bandwidth h; 0: the default, the Gaussian-optimal one for N and the state dimension, 1.6 times it while an update is tempered or gated (gpf-single: 1.6 times it always; at most 0.95).", bounds="[0, 1)", symbol="h", checked_by=_BY_FILTER),
         Spec("flattening_horizon", FLATTENING_HORIZON, "gpf: the update runs in coordinates where the measurement now and of the state flowed half this and this far ahead is linear, so the cloud keeps its spread along what the data cannot see; 0: the measurement now only.", "s", ">= 0", checked_by=_BY_FILTER),
@@ -63,6 +66,8 @@ ESTIMATOR = [
         Spec("angle_noise_std", math.radians(0.03), "Azimuth/elevation noise standard deviation.", "rad", "> 0"),
         Spec("accel_noise_density", 1e-3, "Process-noise white-acceleration density.", "m/s^1.5", ">= 0"),
         Spec("max_step", 10.0, "Longest integration sub-step of the model.", "s", "> 0"),
+        Spec("gravity_field", "point", "Gravity beyond the point mass the model integrates: point (none), j2, zonal (J2-J4) or degree4 (DE430's lunar field through degree 4, turning with the Moon).", choices=FIELDS),
+        Spec("gravity_epoch", 0.0, "degree4: the time (header stamps' scale) at which the Moon-fixed frame's x axis is world_frame's x axis.", "s", "finite"),
     ),
     *_group(
         "Frames",

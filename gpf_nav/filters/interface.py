@@ -38,7 +38,7 @@ GATE = "gate"
 TEMPERING = "tempering"
 """Likelihood tempering: ``tempered_updates`` counts the updates split into stages."""
 MODEL_PROBABILITIES = "model_probabilities"
-"""``model_probabilities`` ``(2,)``: of the nominal and the compensated model."""
+"""``model_probabilities`` ``(K,)``: of the nominal model, then of the compensated models."""
 COMPENSATION = "compensation"
 """An estimated unmodelled acceleration: ``unmodelled_acceleration`` ``(p,)`` and its covariance
 ``unmodelled_acceleration_covariance`` ``(p, p)``."""
@@ -98,7 +98,7 @@ class Filter(ABC):
     tempered_updates: int = 0
     """Updates split into tempering stages (:data:`TEMPERING`)."""
     model_probabilities: np.ndarray | None = None
-    """``(2,)`` probabilities of the nominal and the compensated model (:data:`MODEL_PROBABILITIES`)."""
+    """``(K,)`` probabilities of the nominal model, then of the compensated models (:data:`MODEL_PROBABILITIES`)."""
     unmodelled_acceleration: np.ndarray = _EMPTY_VECTOR
     """Estimated unmodelled acceleration ``(p,)`` (:data:`COMPENSATION`; empty without)."""
     unmodelled_acceleration_covariance: np.ndarray = _EMPTY_MATRIX

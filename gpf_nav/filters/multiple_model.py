@@ -1,35 +1,42 @@
-"""Interacting multiple models: the GPF on the nominal model and on the compensated model, side by side.
+"""Interacting multiple models: the GPF on the nominal model and on compensated models of several scales.
 
 Model-error compensation (:mod:`gpf_nav.models.compensation`) makes a filter robust to an unmodelled
 acceleration, and costs accuracy when there is none: it estimates three extra states that a correct
-model does not need. :class:`MultipleModelGPF` tests the hypothesis instead of assuming it. Two GPFs run
-in parallel, one on the user's model as it is (``nominal``) and one with the compensation
-(``compensated``); a two-state Markov chain switches between them with mean sojourn ``switch_time``.
+model does not need. It also has a scale: its prior, the acceleration's stationary standard deviation
+``sigma``, says how large a force it expects. A force far below ``sigma`` is not worth the extra states
+by the evidence, so the nominal model wins and ignores it, overconfident (the Moon's J2, 4.6e-4 m/s^2,
+against a compensation sized for the paper's 9 % gravity mismatch, 0.13 m/s^2); a force far above it
+cannot be followed. :class:`MultipleModelGPF` tests the hypotheses instead of assuming one: GPFs run in
+parallel, one on the user's model as it is (``nominal``) and one per compensation scale, with
+``sigma_j = compensation_scales[j] * unmodelled_acceleration_std`` (by default ``0.01`` and ``1``: 1e-3
+and 0.1 m/s^2, so that a force from 1e-4 to 0.2 m/s^2 has a member of its size). A Markov chain switches
+between the ``K`` models with mean sojourn ``switch_time``, a switch going to each other model alike.
 Each cycle is Blom's interacting multiple model (IMM):
 
 1. **Mixing**, at the first ``predict`` after an update: with ``mu`` the model probabilities and
-   ``p = 1 - exp(-dt / switch_time)`` the switching probability over that ``dt``, the predicted
-   probabilities are ``c_j = sum_i p_ij mu_i``, and the nominal member's cloud is moved (an affine map,
-   :func:`gpf_nav.filters.kernel.match_moments`) to the mean and covariance of the mixture
-   ``sum_i mu_{i|0} N(m_i, P_i)``, ``mu_{i|0} = p_i0 mu_i / c_0``. The compensated member is not mixed:
-   its model contains the nominal one (``a = 0`` is a state it can be in), so a switch to the nominal
-   model needs no hand-over. Mixing it too (Blom's symmetric IMM) resets its acceleration towards the
-   compensation's prior whenever the nominal model is the more probable, so a small, slowly observable
-   force is never learnt: with an unmodelled 0.02 m/s^2 along-track force and no azimuth the symmetric
-   IMM was 3.1 km and NEES 17 against 1.2 km and NEES 6 for one compensated GPF (20 runs).
+   ``p = 1 - exp(-dt / switch_time)`` the switching probability over that ``dt``, ``p_ii = 1 - p`` and
+   ``p_ij = p / (K - 1)``, the predicted probabilities are ``c_j = sum_i p_ij mu_i``, and the nominal
+   member's cloud is moved (an affine map, :func:`gpf_nav.filters.kernel.match_moments`) to the mean and
+   covariance of the mixture ``sum_i mu_{i|0} N(m_i, P_i)``, ``mu_{i|0} = p_i0 mu_i / c_0``. The
+   compensated members are not mixed: each model contains the nominal one (``a = 0`` is a state it can
+   be in), so a switch to the nominal model needs no hand-over. Mixing them too (Blom's symmetric IMM)
+   resets their acceleration towards the compensation's prior whenever the nominal model is the more
+   probable, so a small, slowly observable force is never learnt: with an unmodelled 0.02 m/s^2
+   along-track force and no azimuth the symmetric IMM was 3.1 km and NEES 17 against 1.2 km and NEES 6
+   for one compensated GPF (20 runs).
 2. Each member predicts and updates on its own model.
 3. **Model probabilities** ``mu_j ∝ c_j p(y | j)``, ``p(y | j)`` the member's incremental evidence
-   (:attr:`ParticleFilter.log_likelihood`, exact for the GPF's corrected weights). When the two members
+   (:attr:`ParticleFilter.log_likelihood`, exact for the GPF's corrected weights). When the members
    did not weigh the same measurement (one gated a component, or re-initialised), ``mu = c``.
 
 The estimate is the mixture ``sum_j mu_j N(m_j, P_j)`` (mean and covariance of the user's state); the
-unmodelled acceleration is the compensated member's, times its probability (the nominal model says
-there is none).
+unmodelled acceleration is the mixture of the compensated members' and the nominal model's zero.
 
 It is the default GPF (``make_filter("gpf")``, the node). What it buys and costs on the lunar descent is
 measured in ``docs/results.md``: the accuracy of the nominal filter when the model is right, the
-compensated filter's when it is not, and the nominal filter's where the compensation cannot be observed
-(range only), at two to three times the cost of one GPF.
+compensated filters' when it is not, at any force from the Moon's J2 to the 9 % mismatch, and the
+nominal filter's where the compensation cannot be observed (range only), at ``K`` times the cost of one
+GPF.
 """
 from __future__ import annotations
 
@@ -37,6 +44,7 @@ import math
 
 import numpy as np
 
+from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD
 from gpf_nav.filters.gpf import GeometricProjectionPF
 from gpf_nav.filters.interface import (CLOUD, COMPENSATION, COSTATE, GATE, MODEL_PROBABILITIES, RESAMPLING,
                                        TEMPERING, Filter)
@@ -46,10 +54,13 @@ from gpf_nav.models.state_space import StateSpaceModel
 
 SWITCH_TIME = 2.0e5
 """Default mean sojourn time of the model chain, s (switching probability 1e-5 per 2 s step)."""
+COMPENSATION_SCALES = (0.01, 1.0)
+"""Default compensation scales: the compensated members' ``sigma`` as fractions of
+``unmodelled_acceleration_std`` (module docstring)."""
 
 
 class MultipleModelGPF(Filter):
-    """IMM over a nominal and a compensated :class:`GeometricProjectionPF` (module docstring).
+    """IMM over a nominal and compensated :class:`GeometricProjectionPF` members (module docstring).
 
     A :class:`~gpf_nav.filters.interface.Filter` whose state lives in its members: it keeps no cloud of
     its own, so it does not run the base class's initialisation, and it answers every capability of
@@ -59,40 +70,58 @@ class MultipleModelGPF(Filter):
         model: the user's state-space model.
         n_particles: particles of each member.
         switch_time: mean sojourn time of the model chain, s (> 0).
-        seed: seed of the two members' random streams (spawned from it).
-        **options: further options of both members (:class:`GeometricProjectionPF`); the compensation
+        compensation_scales: the compensated members' acceleration standard deviations as fractions of
+            ``unmodelled_acceleration_std``, increasing, positive, at most 1 (default
+            :data:`COMPENSATION_SCALES`).
+        seed: seed of the members' random streams (spawned from it).
+        **options: further options of every member (:class:`GeometricProjectionPF`); the compensation
             options (``unmodelled_acceleration_std`` > 0, ``unmodelled_acceleration_time``) apply to the
-            compensated one.
+            compensated ones.
 
     Attributes:
-        nominal, compensated: the two member filters.
-        model_probabilities: ``(2,)`` probabilities of the nominal and the compensated model.
+        nominal: the member on the user's model.
+        scaled: the compensated members, by increasing ``sigma``.
+        compensated: the widest of them (``sigma = unmodelled_acceleration_std``): its model contains
+            every other member's, so its co-state measures what none of them explains.
+        model_probabilities: ``(K,)`` probabilities of the nominal model, then of :attr:`scaled`'s.
     """
 
     def __init__(self, model: StateSpaceModel, n_particles: int = 500, switch_time: float = SWITCH_TIME,
-                 seed: int | np.random.Generator | None = None, **options):
+                 seed: int | np.random.Generator | None = None,
+                 compensation_scales: tuple[float, ...] = COMPENSATION_SCALES, **options):
         if not (math.isfinite(switch_time) and switch_time > 0):
             raise ValueError(f"switch_time must be positive, got {switch_time}")
-        if options.get("unmodelled_acceleration_std", 1.0) == 0.0:
-            raise ValueError("the compensated member needs unmodelled_acceleration_std > 0")
-        streams = np.random.SeedSequence(np.random.default_rng(seed).integers(2 ** 63)).spawn(2)
+        scales = tuple(float(s) for s in compensation_scales)
+        if not scales or scales[-1] != 1.0 or any(not a < b for a, b in zip((0.0,) + scales, scales)):
+            raise ValueError(f"compensation_scales must increase from above 0 to 1, got {compensation_scales}")
+        sigma = options.pop("unmodelled_acceleration_std", UNMODELLED_ACCELERATION_STD)
+        if not sigma > 0.0:
+            raise ValueError("the compensated members need unmodelled_acceleration_std > 0")
         if options.pop("nominal_prior", 0.0):
             raise ValueError("the IMM tests the nominal model itself: its members take no nominal_prior")
+        # the nominal and the widest member keep the first two streams whatever the number of scales
+        streams = np.random.SeedSequence(np.random.default_rng(seed).integers(2 ** 63)).spawn(len(scales) + 1)
         nominal_options = {k: v for k, v in options.items() if not k.startswith("unmodelled_acceleration")}
         self.nominal = GeometricProjectionPF(model, n_particles, unmodelled_acceleration_std=0.0,
                                              seed=np.random.default_rng(streams[0]), **nominal_options)
-        self.compensated = GeometricProjectionPF(model, n_particles, seed=np.random.default_rng(streams[1]),
-                                                 nominal_prior=0.0, **options)
+        stream_of = [*range(2, len(scales) + 1), 1]  # the widest member's is the second stream
+        self.scaled = tuple(
+            GeometricProjectionPF(model, n_particles, seed=np.random.default_rng(streams[stream]), nominal_prior=0.0,
+                                  unmodelled_acceleration_std=scale * sigma, **options)
+            for stream, scale in zip(stream_of, scales))
+        self.compensated = self.scaled[-1]
+        self.compensation_scales = scales
         self.model = model
         self.switch_time = float(switch_time)
-        self.model_probabilities = np.full(2, 0.5)
+        self.model_probabilities = np.full(len(self.members), 1.0 / len(self.members))
         self._predicted_probabilities = self.model_probabilities
         self._mix_due = False
         self._moments = None
 
     @property
-    def members(self) -> tuple[GeometricProjectionPF, GeometricProjectionPF]:
-        return self.nominal, self.compensated
+    def members(self) -> tuple[GeometricProjectionPF, ...]:
+        """The nominal member, then the compensated ones by increasing scale."""
+        return (self.nominal, *self.scaled)
 
     @property
     def capabilities(self) -> frozenset[str]:
@@ -102,11 +131,11 @@ class MultipleModelGPF(Filter):
 
     # --- the filter interface ------------------------------------------------------------------------
     def initialize(self, mean, cov, t0: float = 0.0) -> None:
-        """Both members from the user's prior ``N(mean (n,), cov (n, n))``; model probabilities 1/2."""
+        """Every member from the user's prior ``N(mean (n,), cov (n, n))``; model probabilities alike."""
         self._moments = None
         for member in self.members:
             member.initialize(mean, cov, t0)
-        self.model_probabilities = np.full(2, 0.5)
+        self.model_probabilities = np.full(len(self.members), 1.0 / len(self.members))
         self._predicted_probabilities = self.model_probabilities
         self._mix_due = False
 
@@ -118,7 +147,7 @@ class MultipleModelGPF(Filter):
             member.predict(dt, u)
 
     def update(self, y: np.ndarray, sensor=None) -> None:
-        """Both members update with ``y`` of ``sensor`` (None: the model's); then the probabilities."""
+        """Every member updates with ``y`` of ``sensor`` (None: the model's); then the probabilities."""
         self._moments = None
         before = [(m.gated, m.recoveries) for m in self.members]
         for member in self.members:
@@ -137,14 +166,16 @@ class MultipleModelGPF(Filter):
     def _mix(self, p: float) -> None:
         """IMM mixing with switching probability ``p`` (module docstring, step 1)."""
         mu = self.model_probabilities
-        chain = np.array([[1.0 - p, p], [p, 1.0 - p]])
+        count = mu.size
+        chain = np.full((count, count), p / (count - 1))
+        np.fill_diagonal(chain, 1.0 - p)
         predicted = chain.T @ mu
         if predicted[0] > 0.0:  # (a nominal model of probability 0 keeps its own estimate)
             n = self.model.state_dim
             weights = chain[:, 0] * mu / predicted[0]  # mu_{i|0}
-            moments = [(self.nominal.mean, self.nominal.covariance),
-                       (self.compensated.augmented_mean[:n], self.compensated.augmented_covariance[:n, :n])]
-            self.nominal.set_moments(*mixture_moments(weights, moments))  # the compensated member is not
+            moments = [(self.nominal.mean, self.nominal.covariance)] + [
+                (m.augmented_mean[:n], m.augmented_covariance[:n, :n]) for m in self.scaled]
+            self.nominal.set_moments(*mixture_moments(weights, moments))  # the compensated members are not
             # mixed (module docstring, step 1)
         self._predicted_probabilities = predicted
         self._mix_due = False
@@ -161,7 +192,7 @@ class MultipleModelGPF(Filter):
 
     @property
     def recoveries(self) -> int:
-        return self.nominal.recoveries + self.compensated.recoveries
+        return sum(m.recoveries for m in self.members)
 
     @property
     def mean(self) -> np.ndarray:
@@ -187,36 +218,39 @@ class MultipleModelGPF(Filter):
     @property
     def observability(self):
         """The nominal member's :class:`~gpf_nav.integrity.observability.ObservabilityReport`: what the
-        data determined of the user's state (the compensated member's also counts its accelerations)."""
+        data determined of the user's state (the compensated members' also count their accelerations)."""
         return self.nominal.observability
 
     def observability_trackers(self):
         return tuple(tracker for member in self.members for tracker in member.observability_trackers())
 
+    def _accelerations(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Each model's unmodelled acceleration ``(p,)`` and covariance ``(p, p)`` (the nominal's zero)."""
+        scaled = [(m.unmodelled_acceleration, m.unmodelled_acceleration_covariance) for m in self.scaled]
+        p = scaled[0][0].size
+        return [(np.zeros(p), np.zeros((p, p)))] + scaled
+
     @property
     def unmodelled_acceleration(self) -> np.ndarray:
         """Model-averaged unmodelled acceleration ``(p,)`` (the nominal model's is zero)."""
-        return self.model_probabilities[1] * self.compensated.unmodelled_acceleration
+        return mixture_moments(self.model_probabilities, self._accelerations())[0]
 
     @property
     def unmodelled_acceleration_covariance(self) -> np.ndarray:
         """Its covariance ``(p, p)``."""
-        a = self.compensated.unmodelled_acceleration
-        zero = (np.zeros_like(a), np.zeros((a.size, a.size)))
-        return mixture_moments(self.model_probabilities,
-                        [zero, (a, self.compensated.unmodelled_acceleration_covariance)])[1]
+        return mixture_moments(self.model_probabilities, self._accelerations())[1]
 
     # --- particle diagnostics, model-averaged ----------------------------------------------------------
     @property
     def particles(self) -> np.ndarray:
-        """Both members' particles ``(2N, n)`` in the user's state: with :attr:`weights`, a weighted
+        """Every member's particles ``(K N, n)`` in the user's state: with :attr:`weights`, a weighted
         sample of the mixture."""
         n = self.model.state_dim
-        return np.vstack([self.nominal.particles, self.compensated.particles[:, :n]])
+        return np.vstack([self.nominal.particles] + [m.particles[:, :n] for m in self.scaled])
 
     @property
     def weights(self) -> np.ndarray:
-        """Weights ``(2N,)`` of :attr:`particles`: each member's, times its model probability."""
+        """Weights ``(K N,)`` of :attr:`particles`: each member's, times its model probability."""
         return np.concatenate([mu * m.weights for mu, m in zip(self.model_probabilities, self.members)])
 
     @property
@@ -226,8 +260,8 @@ class MultipleModelGPF(Filter):
 
     @property
     def costate(self) -> np.ndarray:
-        """The compensated member's per-particle co-state ``(N, m)``: the co-state of the model that
-        contains the other, so it measures what neither model explains (the integrity monitor tests
+        """The widest compensated member's per-particle co-state ``(N, m)``: the co-state of the model that
+        contains the others, so it measures what no model explains (the integrity monitor tests
         its mean; a probability-weighted mix of the two members' co-states is not stationary while the
         probabilities move, and its false-alarm rate at a set 1e-3 was 1.8e-3)."""
         return self.compensated.costate
@@ -254,13 +288,13 @@ class MultipleModelGPF(Filter):
 
     @property
     def resampled(self) -> bool:
-        """Whether either member resampled at the last update."""
-        return self.nominal.resampled or self.compensated.resampled
+        """Whether any member resampled at the last update."""
+        return any(m.resampled for m in self.members)
 
     @property
     def resample_count(self) -> int:
-        """Resamplings of both members."""
-        return self.nominal.resample_count + self.compensated.resample_count
+        """Resamplings of every member."""
+        return sum(m.resample_count for m in self.members)
 
     @property
     def reference(self) -> str:
@@ -269,15 +303,16 @@ class MultipleModelGPF(Filter):
 
     @property
     def tempered_updates(self) -> int:
-        """Updates either member split into tempering stages, both members."""
-        return self.nominal.tempered_updates + self.compensated.tempered_updates
+        """Updates a member split into tempering stages, every member."""
+        return sum(m.tempered_updates for m in self.members)
 
     @property
     def gated(self) -> int:
-        """Measurement components refused by the innovation gate, both members."""
-        return self.nominal.gated + self.compensated.gated
+        """Measurement components refused by the innovation gate, every member."""
+        return sum(m.gated for m in self.members)
 
     @property
     def last_recovery_reason(self) -> str | None:
-        """Why a member last re-initialised itself, or None."""
-        return self.compensated.last_recovery_reason or self.nominal.last_recovery_reason
+        """Why a member last re-initialised itself (the widest first), or None."""
+        return next((m.last_recovery_reason for m in (*self.scaled[::-1], self.nominal)
+                     if m.last_recovery_reason), None)

@@ -112,7 +112,8 @@ class MessageLayer:
                                           range_noise_std=p["range_noise_std"],
                                           angle_noise_std=p["angle_noise_std"],
                                           accel_noise_density=p["accel_noise_density"],
-                                          max_step=p["max_step"])
+                                          max_step=p["max_step"], gravity_field=p["gravity_field"],
+                                          gravity_epoch=p["gravity_epoch"])
             self.sensors = build_sensors(p, self.model, STREAMS)
             factory = with_biases(lambda m: make_filter(p["filter"], m, **filter_options(p)), self.model,
                                   self.sensors)

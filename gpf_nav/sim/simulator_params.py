@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from gpf_nav.schema import Spec, check
+from gpf_nav.models.gravity import FIELDS
 from gpf_nav.sim.scenario import CASES, ORBIT_DESIGNS, ScenarioConfig
 from gpf_nav.sim.sensor_suite import SuiteConfig
 
@@ -54,6 +55,8 @@ SCENARIO = [  # name, description, unit, choices
     ("dropout_probability", "Probability a whole measurement is lost.", "", ()),
     ("thrust", "Retrograde specific force magnitude; 0 = coasting.", "m/s^2", ()),
     ("disturbance", "Constant acceleration on the truth in world_frame that the IMU does not sense, like a gravity-field error.", "m/s^2", ()),
+    ("truth_gravity", "Gravity field of the truth beyond the point mass (degree4 turns with the Moon, its x axis world_frame's at the trajectory start); never given to the estimator (its gravity_field).", "", FIELDS),
+    ("thrust_drift_rate", "With thrust: rate at which its direction turns in the orbit plane from retrograde towards the radial.", "rad/s", ()),
     ("measurement_bias_sigma", "Constant error added to range, azimuth and elevation, in their noise standard deviations (the estimator's range_bias_std can estimate the range one).", "", ()),
 ]
 """The :class:`ScenarioConfig` fields the simulator exposes as ``scenario.<name>``."""
