@@ -21,7 +21,7 @@ from gpf_nav.filters import (BootstrapPF, CompensatedEKF, EnsembleKF, ExtendedKF
 from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD
 from gpf_nav.filters.gating import OUTLIER_GATE, OUTLIER_GATE_LIMIT
 from gpf_nav.filters.gpf import OBSERVABILITY_CONSTRAINT
-from gpf_nav.filters.multiple_model import SWITCH_TIME
+from gpf_nav.filters.multiple_model import COMPENSATION_SCALES, SWITCH_TIME
 from gpf_nav.models.state_space import StateSpaceModel
 
 KINDS = ("gpf", "particle", "ensemble", "kalman")
@@ -92,12 +92,13 @@ class FilterEntry:
         return {"gpf": 1, "particle": 1, "ensemble": 2}.get(self.kind)
 
 
-def _gpf(model, n_particles, seed, switch_time=SWITCH_TIME, **options):
-    """The multiple model of two GPFs, or the nominal GPF alone when the compensated model is switched off
-    (``unmodelled_acceleration_std`` 0)."""
+def _gpf(model, n_particles, seed, switch_time=SWITCH_TIME, compensation_scales=COMPENSATION_SCALES, **options):
+    """The multiple model of the nominal and the compensated GPFs, or the nominal GPF alone when the
+    compensation is switched off (``unmodelled_acceleration_std`` 0)."""
     if options.get("unmodelled_acceleration_std", UNMODELLED_ACCELERATION_STD) == 0.0:
         return GeometricProjectionPF(model, n_particles, seed=seed, **options)
-    return MultipleModelGPF(model, n_particles, switch_time=switch_time, seed=seed, **options)
+    return MultipleModelGPF(model, n_particles, switch_time=switch_time, seed=seed,
+                            compensation_scales=compensation_scales, **options)
 
 
 def _gpf_variant(**fixed) -> Callable[..., Filter]:
@@ -149,9 +150,9 @@ for _entry in (
                 lambda model, n_particles, seed, **options: _gpf(
                     model, n_particles, seed, **{**NAVIGATION_GPF, **options}),
                 "gpf", GPF_OPTIONS | {"switch_time", "compensation_scales"}, "navigation", node=True, aliases=("gpf-mm",),
-                description="the multiple-model GPF: two navigation-grade GPFs (cloud metric, exact weights, "
-                            "tempering, the update flattened along the flow), on the nominal and on the "
-                            "compensated model; the node's default"),
+                description="the multiple-model GPF: navigation-grade GPFs (cloud metric, exact weights, "
+                            "tempering, the update flattened along the flow) on the nominal model and on "
+                            "the compensated model at each compensation scale; the node's default"),
     FilterEntry("ekf-comp", "EKF + compensation", _ekf_compensated(), "kalman", table="navigation",
                 description="EKF with the same unmodelled-acceleration compensation and tuning as gpf"),
     FilterEntry("ekf-oracle", "EKF, oracle-tuned Q", _ekf, "kalman", table="navigation", tunes="ekf",

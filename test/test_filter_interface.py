@@ -58,7 +58,8 @@ ANSWERS = {
                         and np.isfinite(f.costate_norm_mean) and np.isfinite(f.costate_norm_max)),
     GATE: lambda f: f.gated >= 0,
     TEMPERING: lambda f: f.tempered_updates >= 0,
-    MODEL_PROBABILITIES: lambda f: f.model_probabilities.shape == (2,) and np.isclose(f.model_probabilities.sum(), 1),
+    MODEL_PROBABILITIES: lambda f: (f.model_probabilities.ndim == 1 and f.model_probabilities.size >= 2
+                                    and np.isclose(f.model_probabilities.sum(), 1)),
     COMPENSATION: lambda f: (f.unmodelled_acceleration.size > 0 and f.unmodelled_acceleration_covariance.shape
                              == (f.unmodelled_acceleration.size,) * 2),
     SENSOR_BIAS: lambda f: all(len(f.sensor_bias(name)) == 2 for name in f.sensor_names) and f.sensor_names,

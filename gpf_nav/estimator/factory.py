@@ -58,7 +58,8 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
     options = dict(reference=reference, weighting=weighting, metric=metric,
                    unmodelled_acceleration_std=unmodelled_acceleration_std,
                    unmodelled_acceleration_time=unmodelled_acceleration_time, nominal_prior=nominal_prior,
-                   switch_time=model_switch_time, compensation_scales=tuple(compensation_scales),
+                   switch_time=model_switch_time,
+                   compensation_scales=tuple(np.atleast_1d(np.asarray(compensation_scales, dtype=float)).tolist()),
                    resampling=resampling, ess_threshold=ess_threshold,
                    collapse_steps=int(collapse_steps), compute_costate=bool(compute_costate),
                    alpha=ukf_alpha, beta=ukf_beta, kappa=ukf_kappa)
@@ -106,7 +107,7 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
                           "positive for gpf-mm (its second model is the compensated one) [m/s^2]")
         if not (math.isfinite(model_switch_time) and model_switch_time > 0.0):
             errors.append(f"parameter 'model_switch_time' = {model_switch_time!r} must be positive [s]")
-        scales = list(compensation_scales)
+        scales = np.atleast_1d(np.asarray(compensation_scales, dtype=float)).tolist()
         if not scales or scales[-1] != 1.0 or any(not a < b for a, b in zip([0.0] + scales, scales)):
             errors.append(f"parameter 'compensation_scales' = {scales!r} must increase from above 0 to 1")
     if entry.kind == "gpf":

@@ -156,7 +156,8 @@ class MessageLayer:
         configuration. False and why when it failed (the first update then waits for the kernels), and
         one line saying what happened."""
         p = self.params
-        key = (self.filter_name, tuple(sorted(filter_options(p).items())))
+        key = (self.filter_name, tuple(sorted((name, tuple(value) if isinstance(value, list) else value)
+                                              for name, value in filter_options(p).items())))
         if key in _WARMED:
             return True, "warm-up: this filter configuration already ran in this process"
         state = initial_state(ScenarioConfig()) if p["initial_state"] is None else np.array(p["initial_state"])
