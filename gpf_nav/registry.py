@@ -21,7 +21,7 @@ from gpf_nav.filters import (BootstrapPF, CompensatedEKF, EnsembleKF, ExtendedKF
 from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD
 from gpf_nav.filters.gating import OUTLIER_GATE, OUTLIER_GATE_LIMIT
 from gpf_nav.filters.gpf import OBSERVABILITY_CONSTRAINT
-from gpf_nav.filters.multiple_model import COMPENSATION_SCALES, SWITCH_TIME
+from gpf_nav.filters.multiple_model import COMPENSATION_SCALES, COMPENSATION_TIMES, SWITCH_TIME
 from gpf_nav.models.state_space import StateSpaceModel
 
 KINDS = ("gpf", "particle", "ensemble", "kalman")
@@ -92,13 +92,15 @@ class FilterEntry:
         return {"gpf": 1, "particle": 1, "ensemble": 2}.get(self.kind)
 
 
-def _gpf(model, n_particles, seed, switch_time=SWITCH_TIME, compensation_scales=COMPENSATION_SCALES, **options):
+def _gpf(model, n_particles, seed, switch_time=SWITCH_TIME, compensation_scales=COMPENSATION_SCALES,
+         compensation_times=COMPENSATION_TIMES, **options):
     """The multiple model of the nominal and the compensated GPFs, or the nominal GPF alone when the
     compensation is switched off (``unmodelled_acceleration_std`` 0)."""
     if options.get("unmodelled_acceleration_std", UNMODELLED_ACCELERATION_STD) == 0.0:
         return GeometricProjectionPF(model, n_particles, seed=seed, **options)
     return MultipleModelGPF(model, n_particles, switch_time=switch_time, seed=seed,
-                            compensation_scales=compensation_scales, **options)
+                            compensation_scales=compensation_scales, compensation_times=compensation_times,
+                            **options)
 
 
 def _gpf_variant(**fixed) -> Callable[..., Filter]:
@@ -149,7 +151,7 @@ for _entry in (
     FilterEntry("gpf", "GPF navigation (default)",
                 lambda model, n_particles, seed, **options: _gpf(
                     model, n_particles, seed, **{**NAVIGATION_GPF, **options}),
-                "gpf", GPF_OPTIONS | {"switch_time", "compensation_scales"}, "navigation", node=True, aliases=("gpf-mm",),
+                "gpf", GPF_OPTIONS | {"switch_time", "compensation_scales", "compensation_times"}, "navigation", node=True, aliases=("gpf-mm",),
                 description="the multiple-model GPF: navigation-grade GPFs (cloud metric, exact weights, "
                             "tempering, the update flattened along the flow) on the nominal model and on "
                             "the compensated model at each compensation scale; the node's default"),
@@ -183,7 +185,7 @@ for _entry in (
                 description="one navigation-grade GPF on the compensated model, averaged with the nominal "
                             "hypothesis by Savage-Dickey (the default before the multiple model)"),
     FilterEntry("gpf-mean", "GPF navigation, mean-linearised update", _gpf, "gpf",
-                GPF_OPTIONS | {"switch_time", "compensation_scales"},
+                GPF_OPTIONS | {"switch_time", "compensation_scales", "compensation_times"},
                 description="gpf with the measurement linearised once at each member's mean (linearization "
                             "mean: the default before issue 23; it narrows what the data cannot see)"),
     FilterEntry("gpf-qmetric", "GPF Q-metric (innovation, corrected, eps=1)",

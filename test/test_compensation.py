@@ -20,16 +20,16 @@ def constant_velocity():
     return model
 
 
-def augmented_linear(base, sigma=SIGMA):
+def augmented_linear(base, sigma=SIGMA, tau=TAU):
     """The augmented model written as a linear-Gaussian model: ``[p, v, a]``, ``v' = a``,
     ``a' = -a / tau + sigma sqrt(2 / tau) w``."""
     A = np.zeros((3, 3))
     A[:2, :2] = base.A
     A[1, 2] = 1.0
-    A[2, 2] = -1.0 / TAU
+    A[2, 2] = -1.0 / tau
     G = np.zeros((3, 2))
     G[:2, :1] = base.G
-    G[2, 1] = sigma * np.sqrt(2.0 / TAU)
+    G[2, 1] = sigma * np.sqrt(2.0 / tau)
     return LinearGaussianModel(A=A, G=G, C=np.hstack([base.C, [[0.0]]]), R=base.R)
 
 
@@ -66,9 +66,9 @@ def test_lunar_compensation_noise_is_finite_for_any_gap():
         assert np.linalg.eigvalsh(Q / np.abs(Q).max()).min() > -1e-9
 
 
-def _kalman_of_augmented(ys, dt, mean, cov, sigma=SIGMA):
+def _kalman_of_augmented(ys, dt, mean, cov, sigma=SIGMA, tau=TAU):
     base = constant_velocity()
-    linear = augmented_linear(base, sigma)
+    linear = augmented_linear(base, sigma, tau)
     m = np.concatenate([mean, [0.0]])
     P = np.zeros((3, 3))
     P[:2, :2] = cov

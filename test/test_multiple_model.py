@@ -11,9 +11,9 @@ from test_compensation import SIGMA, TAU, _kalman_of_augmented, augmented_linear
 MEAN, COV = np.array([0.0, 1.0]), np.diag([4.0, 1.0])
 
 
-def run(ys, seed=0, scales=(0.01, 1.0)):
+def run(ys, seed=0, scales=(0.01, 1.0), times=(1.0, 1.0)):
     f = MultipleModelGPF(constant_velocity(), 1000, seed=seed, unmodelled_acceleration_std=SIGMA,
-                         unmodelled_acceleration_time=TAU, compensation_scales=scales)
+                         unmodelled_acceleration_time=TAU, compensation_scales=scales, compensation_times=times)
     f.initialize(MEAN, COV)
     for y in ys:
         f.predict(1.0)
@@ -71,6 +71,22 @@ def test_a_small_acceleration_selects_the_member_of_its_scale():
     np.testing.assert_allclose(np.sqrt(np.diag(f.covariance)), sd[:2], rtol=0.3)
 
 
+def test_a_varying_acceleration_selects_the_member_of_its_correlation_time():
+    """An acceleration of 0.1 sigma that decorrelates in a tenth of tau (5 steps): of two members of that
+    scale, the one with that correlation time wins against the one that takes it for constant, and the
+    estimate is its Kalman posterior."""
+    small, short = 0.1 * SIGMA, 0.1 * TAU
+    ys = simulate(augmented_linear(constant_velocity(), small, short), np.array([0.0, 1.0, small]), 200, 1.0,
+                  seed=15)
+    exact_mean, exact_cov = _kalman_of_augmented(ys, 1.0, MEAN, COV, small, short)
+    f = run(ys, scales=(0.1, 0.2, 1.0), times=(0.1, 1.0, 1.0))
+    nominal, varying, constant, widest = f.model_probabilities
+    assert varying > max(nominal, constant, widest)
+    sd = np.sqrt(np.diag(exact_cov))
+    np.testing.assert_array_less(np.abs(f.mean - exact_mean[:2]), 0.3 * sd[:2])
+    np.testing.assert_allclose(np.sqrt(np.diag(f.covariance)), sd[:2], rtol=0.3)
+
+
 def test_set_moments_gives_the_cloud_the_requested_moments():
     f = GeometricProjectionPF(constant_velocity(), 300, seed=3)
     f.initialize(MEAN, COV)
@@ -90,7 +106,10 @@ def test_options_are_checked_and_runs_repeat_bit_for_bit():
         MultipleModelGPF(constant_velocity(), nominal_prior=0.5)
     for scales in ((), (0.5,), (1.0, 0.1), (0.0, 1.0), (0.1, 0.1, 1.0)):
         with pytest.raises(ValueError, match="compensation_scales"):
-            MultipleModelGPF(constant_velocity(), compensation_scales=scales)
+            MultipleModelGPF(constant_velocity(), compensation_scales=scales, compensation_times=(1.0,) * len(scales))
+    for times in ((1.0,), (0.5, 0.5), (0.0, 1.0), (1.0, 1.0, 1.0)):
+        with pytest.raises(ValueError, match="compensation_times"):
+            MultipleModelGPF(constant_velocity(), compensation_scales=(0.1, 1.0), compensation_times=times)
     assert MultipleModelGPF(constant_velocity()).compensated.model_probabilities is None
     ys = simulate(constant_velocity(), MEAN, 20, 1.0, seed=13)
     np.testing.assert_array_equal(run(ys, seed=5).covariance, run(ys, seed=5).covariance)

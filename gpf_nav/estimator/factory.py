@@ -12,7 +12,7 @@ import numpy as np
 from gpf_nav import registry
 from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME
 from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
-from gpf_nav.filters.multiple_model import COMPENSATION_SCALES, SWITCH_TIME
+from gpf_nav.filters.multiple_model import COMPENSATION_SCALES, COMPENSATION_TIMES, SWITCH_TIME
 from gpf_nav.models.gravity import FIELDS, make_field
 from gpf_nav.models.lunar import LunarDescentModel
 
@@ -28,7 +28,8 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
                 unmodelled_acceleration_time: float = UNMODELLED_ACCELERATION_TIME,
                 nominal_prior: float = NOMINAL_PRIOR, kernel_bandwidth: float = 0.0,
                 flattening_horizon: float = registry.FLATTENING_HORIZON, model_switch_time: float = SWITCH_TIME,
-                compensation_scales=COMPENSATION_SCALES, collapse_steps: int = 0,
+                compensation_scales=COMPENSATION_SCALES, compensation_times=COMPENSATION_TIMES,
+                collapse_steps: int = 0,
                 resampling: str = "systematic", ess_threshold: float = 0.5, compute_costate: bool = True,
                 ukf_alpha: float = 1e-3, ukf_beta: float = 2.0, ukf_kappa: float = 0.0):
     """Build the node's filter ``name`` (one of :data:`FILTERS`, an entry of :mod:`gpf_nav.registry`) on
@@ -51,7 +52,7 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
                                   unmodelled_acceleration_time=unmodelled_acceleration_time,
                                   nominal_prior=nominal_prior, kernel_bandwidth=kernel_bandwidth,
                                   flattening_horizon=flattening_horizon, model_switch_time=model_switch_time,
-                                  compensation_scales=compensation_scales)
+                                  compensation_scales=compensation_scales, compensation_times=compensation_times)
     if errors:
         raise ValueError("; ".join(errors))
     seed = None if seed is None or int(seed) < 0 else int(seed)
@@ -59,7 +60,7 @@ def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 
                    unmodelled_acceleration_std=unmodelled_acceleration_std,
                    unmodelled_acceleration_time=unmodelled_acceleration_time, nominal_prior=nominal_prior,
                    switch_time=model_switch_time,
-                   compensation_scales=tuple(np.atleast_1d(np.asarray(compensation_scales, dtype=float)).tolist()),
+                   compensation_scales=_floats(compensation_scales), compensation_times=_floats(compensation_times),
                    resampling=resampling, ess_threshold=ess_threshold,
                    collapse_steps=int(collapse_steps), compute_costate=bool(compute_costate),
                    alpha=ukf_alpha, beta=ukf_beta, kappa=ukf_kappa)
@@ -77,7 +78,8 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
                          ukf_kappa=0.0, state_dim=6, unmodelled_acceleration_std=0.0,
                          unmodelled_acceleration_time=1.0, nominal_prior=0.0, kernel_bandwidth=0.0,
                          flattening_horizon=0.0, model_switch_time=SWITCH_TIME,
-                         compensation_scales=COMPENSATION_SCALES) -> list[str]:
+                         compensation_scales=COMPENSATION_SCALES,
+                         compensation_times=COMPENSATION_TIMES) -> list[str]:
     """Human-readable errors for invalid filter parameters (empty when all are valid)."""
     from gpf_nav import resampling as resamplers
     from gpf_nav.filters.gpf import METRICS, REFERENCES, WEIGHTINGS
@@ -107,9 +109,12 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
                           "positive for gpf-mm (its second model is the compensated one) [m/s^2]")
         if not (math.isfinite(model_switch_time) and model_switch_time > 0.0):
             errors.append(f"parameter 'model_switch_time' = {model_switch_time!r} must be positive [s]")
-        scales = np.atleast_1d(np.asarray(compensation_scales, dtype=float)).tolist()
-        if not scales or scales[-1] != 1.0 or any(not a < b for a, b in zip([0.0] + scales, scales)):
-            errors.append(f"parameter 'compensation_scales' = {scales!r} must increase from above 0 to 1")
+        scales, times = _floats(compensation_scales), _floats(compensation_times)
+        if not scales or scales[-1] != 1.0 or any(not a < b for a, b in zip((0.0,) + scales, scales)):
+            errors.append(f"parameter 'compensation_scales' = {list(scales)!r} must increase from above 0 to 1")
+        if len(times) != len(scales) or not times or times[-1] != 1.0 or not all(0.0 < t < math.inf for t in times):
+            errors.append(f"parameter 'compensation_times' = {list(times)!r} must be positive, one per "
+                          "compensation scale, the last 1")
     if entry.kind == "gpf":
         if reference not in REFERENCES:
             errors.append(f"parameter 'reference' = {reference!r} must be one of {', '.join(REFERENCES)}")
@@ -137,6 +142,11 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
         if not state_dim + ukf_kappa > 0.0:
             errors.append(f"parameter 'ukf_kappa' = {ukf_kappa!r} must exceed -{state_dim}")
     return errors
+
+
+def _floats(values) -> tuple[float, ...]:
+    """A list parameter (or one number) as a tuple of floats."""
+    return tuple(np.atleast_1d(np.asarray(values, dtype=float)).tolist())
 
 
 def make_lunar_model(*, mu: float, station, range_noise_std: float, angle_noise_std: float,

@@ -44,7 +44,7 @@ import math
 
 import numpy as np
 
-from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD
+from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME
 from gpf_nav.filters.gpf import GeometricProjectionPF
 from gpf_nav.filters.interface import (CLOUD, COMPENSATION, COSTATE, GATE, MODEL_PROBABILITIES, RESAMPLING,
                                        TEMPERING, Filter)
@@ -57,6 +57,8 @@ SWITCH_TIME = 2.0e5
 COMPENSATION_SCALES = (0.01, 1.0)
 """Default compensation scales: the compensated members' ``sigma`` as fractions of
 ``unmodelled_acceleration_std`` (module docstring)."""
+COMPENSATION_TIMES = (1.0, 1.0)
+"""Default correlation times of the compensated members as fractions of ``unmodelled_acceleration_time``."""
 
 
 class MultipleModelGPF(Filter):
@@ -71,8 +73,10 @@ class MultipleModelGPF(Filter):
         n_particles: particles of each member.
         switch_time: mean sojourn time of the model chain, s (> 0).
         compensation_scales: the compensated members' acceleration standard deviations as fractions of
-            ``unmodelled_acceleration_std``, increasing, positive, at most 1 (default
+            ``unmodelled_acceleration_std``, increasing, positive, the last 1 (default
             :data:`COMPENSATION_SCALES`).
+        compensation_times: their correlation times as fractions of ``unmodelled_acceleration_time``,
+            positive, the last 1, one per scale (default :data:`COMPENSATION_TIMES`).
         seed: seed of the members' random streams (spawned from it).
         **options: further options of every member (:class:`GeometricProjectionPF`); the compensation
             options (``unmodelled_acceleration_std`` > 0, ``unmodelled_acceleration_time``) apply to the
@@ -88,13 +92,18 @@ class MultipleModelGPF(Filter):
 
     def __init__(self, model: StateSpaceModel, n_particles: int = 500, switch_time: float = SWITCH_TIME,
                  seed: int | np.random.Generator | None = None,
-                 compensation_scales: tuple[float, ...] = COMPENSATION_SCALES, **options):
+                 compensation_scales: tuple[float, ...] = COMPENSATION_SCALES,
+                 compensation_times: tuple[float, ...] = COMPENSATION_TIMES, **options):
         if not (math.isfinite(switch_time) and switch_time > 0):
             raise ValueError(f"switch_time must be positive, got {switch_time}")
         scales = tuple(float(s) for s in compensation_scales)
         if not scales or scales[-1] != 1.0 or any(not a < b for a, b in zip((0.0,) + scales, scales)):
             raise ValueError(f"compensation_scales must increase from above 0 to 1, got {compensation_scales}")
+        times = tuple(float(s) for s in compensation_times)
+        if len(times) != len(scales) or times[-1] != 1.0 or not all(0.0 < t < math.inf for t in times):
+            raise ValueError(f"compensation_times must be positive, one per scale, the last 1; got {compensation_times}")
         sigma = options.pop("unmodelled_acceleration_std", UNMODELLED_ACCELERATION_STD)
+        tau = options.pop("unmodelled_acceleration_time", UNMODELLED_ACCELERATION_TIME)
         if not sigma > 0.0:
             raise ValueError("the compensated members need unmodelled_acceleration_std > 0")
         if options.pop("nominal_prior", 0.0):
@@ -107,10 +116,11 @@ class MultipleModelGPF(Filter):
         stream_of = [*range(2, len(scales) + 1), 1]  # the widest member's is the second stream
         self.scaled = tuple(
             GeometricProjectionPF(model, n_particles, seed=np.random.default_rng(streams[stream]), nominal_prior=0.0,
-                                  unmodelled_acceleration_std=scale * sigma, **options)
-            for stream, scale in zip(stream_of, scales))
+                                  unmodelled_acceleration_std=scale * sigma, unmodelled_acceleration_time=time * tau,
+                                  **options)
+            for stream, scale, time in zip(stream_of, scales, times))
         self.compensated = self.scaled[-1]
-        self.compensation_scales = scales
+        self.compensation_scales, self.compensation_times = scales, times
         self.model = model
         self.switch_time = float(switch_time)
         self.model_probabilities = np.full(len(self.members), 1.0 / len(self.members))
