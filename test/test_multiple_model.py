@@ -72,19 +72,19 @@ def test_a_small_acceleration_selects_the_member_of_its_scale():
 
 
 def test_a_varying_acceleration_selects_the_member_of_its_correlation_time():
-    """An acceleration of 0.1 sigma that decorrelates in a tenth of tau (5 steps): of two members of that
-    scale, the one with that correlation time wins against the one that takes it for constant, and the
-    estimate is its Kalman posterior."""
-    small, short = 0.1 * SIGMA, 0.1 * TAU
+    """An acceleration of 0.5 sigma that decorrelates in a tenth of tau (5 steps): the member of that scale
+    and correlation time wins, and the estimate is its Kalman posterior, whose velocity is 26 % less certain
+    than that of the same scale taken for constant (with the member's time ignored, its probability was
+    0.66 and the velocity sd 13 % too small)."""
+    small, short = 0.5 * SIGMA, 0.1 * TAU
     ys = simulate(augmented_linear(constant_velocity(), small, short), np.array([0.0, 1.0, small]), 200, 1.0,
                   seed=15)
     exact_mean, exact_cov = _kalman_of_augmented(ys, 1.0, MEAN, COV, small, short)
-    f = run(ys, scales=(0.1, 0.2, 1.0), times=(0.1, 1.0, 1.0))
-    nominal, varying, constant, widest = f.model_probabilities
-    assert varying > max(nominal, constant, widest)
+    f = run(ys, scales=(0.5, 1.0), times=(0.1, 1.0))
+    assert f.model_probabilities[1] > 0.9
     sd = np.sqrt(np.diag(exact_cov))
-    np.testing.assert_array_less(np.abs(f.mean - exact_mean[:2]), 0.3 * sd[:2])
-    np.testing.assert_allclose(np.sqrt(np.diag(f.covariance)), sd[:2], rtol=0.3)
+    np.testing.assert_array_less(np.abs(f.mean - exact_mean[:2]), 0.1 * sd[:2])
+    np.testing.assert_allclose(np.sqrt(np.diag(f.covariance)), sd[:2], rtol=0.05)
 
 
 def test_set_moments_gives_the_cloud_the_requested_moments():
