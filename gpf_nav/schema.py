@@ -25,7 +25,8 @@ class ParameterError(ValueError):
 
 @dataclass(frozen=True)
 class Spec:
-    """One parameter. ``default`` None: an optional list of ``length`` floats with no default."""
+    """One parameter. ``default`` None: an optional list of ``length`` items (floats, or strings with
+    ``item`` ``"string"``) with no default, none given being an empty list."""
     name: str
     default: object
     description: str
@@ -37,12 +38,13 @@ class Spec:
     group: str = ""          # heading of the docs table and the params file
     live: bool = False       # may be changed at run time with ros2 param set
     checked_by: str = ""     # the code that checks it, when not :func:`check` (see the module docstring)
+    item: str = "float"      # a list's elements: "float" or "string"
 
     @property
     def type_name(self) -> str:
-        """``bool``, ``int``, ``float``, ``string`` or ``float[]`` / ``float[n]``."""
+        """``bool``, ``int``, ``float``, ``string`` or ``float[]`` / ``float[n]`` / ``string[]``."""
         if self.default is None or isinstance(self.default, list):
-            return f"float[{self.length}]" if self.length else "float[]"
+            return f"{self.item}[{self.length}]" if self.length else f"{self.item}[]"
         return {bool: "bool", int: "int", float: "float", str: "string"}[type(self.default)]
 
     @property
@@ -58,6 +60,12 @@ def coerce(spec: Spec, value):
     """``value`` converted to the type of ``spec.default``; ParameterError when it cannot be."""
     default = spec.default
     try:
+        if default is None and spec.item == "string":
+            if value is None or len(value) == 0:
+                return None
+            if isinstance(value, str) or not all(isinstance(v, str) for v in value):
+                raise TypeError
+            return list(value)
         if default is None:
             return None if value is None or len(value) == 0 else [float(v) for v in value]
         if isinstance(default, bool):
@@ -81,7 +89,12 @@ def coerce(spec: Spec, value):
     except (TypeError, ValueError):
         pass
     raise ParameterError(f"parameter '{spec.name}' = {value!r} has the wrong type; expected "
-                         f"{type(default).__name__ if default is not None else f'a list of {spec.length} floats'}")
+                         f"{type(default).__name__ if default is not None else _list_type(spec)}")
+
+
+def _list_type(spec: Spec) -> str:
+    count = spec.length or "any number of"
+    return f"a list of {count} {'strings' if spec.item == 'string' else 'floats'}"
 
 
 _INTERVAL = re.compile(r"([\[(])\s*(\S+)\s*,\s*(\S+)\s*([\])])")
@@ -119,6 +132,8 @@ def check_value(spec: Spec, value) -> str | None:
     label = f"parameter '{spec.name}'" + (f" ({spec.symbol})" if spec.symbol else "")
     if spec.choices and value not in spec.choices:
         return f"{label} = {value!r} must be one of {', '.join(spec.choices)}"
+    if isinstance(value, list) and spec.item == "string":
+        return None if all(value) else f"{label} = {value!r} must not hold an empty name"
     if isinstance(value, list):
         if (spec.length and len(value) != spec.length) or not all(
                 within(spec.bounds or "finite", v) for v in value):
@@ -182,7 +197,7 @@ def params_file(specs: list[Spec], node: str, header: list[str]) -> str:
             lines.append(f"    {prefix}:")
         section = prefix
         indent = "      " if prefix else "    "
-        entry = f"# {key}: [{spec.length} values]" if spec.default is None else f"{key}: {yaml_value(spec.default)}"
+        entry = f"# {key}: [{spec.length or 'any number of'} values]" if spec.default is None else f"{key}: {yaml_value(spec.default)}"
         lines.append(f"{indent + entry:<47} # {spec.help}")
     return "\n".join(lines) + "\n"
 

@@ -39,7 +39,7 @@ REASONS = (
     "bad_stamp", "wrong_frame", "non_finite", "no_measured_component", "non_positive_range",
     "range_out_of_limits", "angle_out_of_range", "non_unit_quaternion", "not_provided", "stale_stamp",
     "future_stamp", "rate_limit", "not_initialized", "no_velocity", "filter_error", "internal_error",
-    "older_than_history", "not_positive_definite", "innovation_gate",
+    "older_than_history", "not_positive_definite", "innovation_gate", "unknown_station",
 )
 
 OK = (True, "")

@@ -16,6 +16,7 @@ from dataclasses import replace
 
 from gpf_nav import resampling
 from gpf_nav.estimator.factory import FILTERS
+from gpf_nav.estimator.stations import station_errors
 from gpf_nav.estimator.streams import STREAMS, stream_parameters
 from gpf_nav.filters.gpf import METRICS, REFERENCES, WEIGHTINGS
 from gpf_nav.filters.multiple_model import COMPENSATION_SCALES, COMPENSATION_TIMES
@@ -74,8 +75,21 @@ ESTIMATOR = [
         "Frames",
         Spec("world_frame", "moon_inertial", "Frame of the state and of odometry header.frame_id (Moon-centred inertial).", bounds="non-empty"),
         Spec("base_frame", "base_link", "odometry child_frame_id (axes taken aligned with world_frame)."),
-        Spec("measurement_frame", "station", "Required header.frame_id of measurements/rae and measurements/range ('' = any); measurements/position and measurements/velocity must be in world_frame."),
+        Spec("measurement_frame", "station", "header.frame_id of measurements/rae and measurements/range from the station parameter's station ('' = any frame that names no other station); measurements/position may be in world_frame, moon_fixed_frame or site_frame, measurements/velocity must be in world_frame."),
         Spec("imu_frame", "base_link", "Required header.frame_id of imu ('' = any)."),
+        Spec("moon_fixed_frame", "moon_fixed", "The Moon-fixed frame (turning with the Moon about world_frame's z axis at 2.6617e-6 rad/s) on TF and in measurements/position header.frame_id.", bounds="non-empty"),
+        Spec("moon_epoch", 0.0, "The time (header stamps' scale) at which moon_fixed_frame's x axis is world_frame's x axis.", "s", "finite"),
+        Spec("site_frame", "map", "The landing site's east-north-up frame (REP 105 map) on TF and in measurements/position header.frame_id.", bounds="non-empty"),
+        Spec("site_latitude", 0.0, "Latitude of site_frame's origin (spherical, REP 103).", "rad", "[-1.5707963267948966, 1.5707963267948966]"),
+        Spec("site_longitude", 0.0, "Longitude of site_frame's origin, east positive.", "rad", "finite"),
+        Spec("site_height", 0.0, "Height of site_frame's origin above the Moon's mean radius (1737.4 km).", "m", "finite"),
+    ),
+    *_group(
+        "Stations (measurements/rae and measurements/range name theirs in header.frame_id)",
+        Spec("station_names", None, "Stations on the rotating Moon: a message from one has its name as header.frame_id; measurement_frame stays the station parameter's.", item="string"),
+        Spec("station_lat_lon_height", None, "Latitude (rad), longitude (rad, east positive) and height (m above the mean radius) of each of station_names in turn, 3 numbers per station.", "rad, rad, m", "finite"),
+        Spec("inertial_station_names", None, "Stations fixed in world_frame, named as station_names (azimuth atan2(dy, dx) as the station parameter's).", item="string"),
+        Spec("inertial_station_positions", None, "Position in world_frame of each of inertial_station_names in turn, 3 numbers per station.", "m", "finite"),
     ),
     *_group(
         "Initialisation",
@@ -142,7 +156,7 @@ BY_NAME = {spec.name: spec for spec in ESTIMATOR}
 def check_estimator_parameters(p: dict) -> list[str]:
     """Errors in the estimator's parameters: each against its schema entry, then the rules that tie
     parameters together (the filter's options are ``make_filter``'s to check)."""
-    errors = check(ESTIMATOR, p)
+    errors = check(ESTIMATOR, p) + station_errors(p)
     if not 2 <= p["monitor_min_reference"] <= p["monitor_reference"]:
         errors.append(f"parameters 'monitor_min_reference' = {p['monitor_min_reference']} and 'monitor_reference' "
                       f"= {p['monitor_reference']} must satisfy 2 <= monitor_min_reference <= monitor_reference")

@@ -84,6 +84,10 @@ class Stream:
         gate_dof: > 0: an innovation gate (parameter ``<name>_gate``) of this many degrees of freedom.
         bias: optional bias states of its sensor.
         parameters: its own parameters (frame, noise, ...).
+        station: a message names its station in ``header.frame_id``: ``frame``'s station (the model's own
+            measurement) or a station of the tables (:mod:`gpf_nav.estimator.stations`), whose sensor it feeds.
+        moon_frames: a message may also be in moon_fixed_frame or site_frame (a position, turned into
+            world_frame; :class:`gpf_nav.estimator.stations.MoonFrames`).
     """
     name: str
     topic: str
@@ -98,6 +102,8 @@ class Stream:
     gate_dof: int = 0
     bias: BiasStates | None = None
     parameters: tuple[Spec, ...] = ()
+    station: bool = False
+    moon_frames: bool = False
 
     def measurement(self, reading: Reading, dim: int) -> np.ndarray:
         """``y`` ``(dim,)`` of the sensor (of measurement dimension ``dim``) from a checked reading."""
@@ -128,12 +134,12 @@ def _altitude(p: dict, model, bias) -> Sensor:
 
 STREAMS = [
     Stream("rae", "measurements/rae", "geometry_msgs/Vector3Stamped", "measurement_frame", check_rae,
-           sensor=_model_sensor, model_measurement=True,
+           sensor=_model_sensor, model_measurement=True, station=True,
            bias=BiasStates("range", (1.0, 0.0, 0.0), "m", "a range bias (rae and range)")),
     Stream("range", "measurements/range", "sensor_msgs/Range", "measurement_frame", check_range, feeds="rae",
-           model_measurement=True, components=(0,)),
+           model_measurement=True, components=(0,), station=True),
     Stream("position", "measurements/position", "geometry_msgs/PoseWithCovarianceStamped", "world_frame", check_fix,
-           sensor=_position, noise_from_message=True, gate_dof=3,
+           sensor=_position, noise_from_message=True, gate_dof=3, moon_frames=True,
            bias=BiasStates("position", (1.0, 1.0, 1.0), "m", "a bias per axis of measurements/position")),
     Stream("velocity", "measurements/velocity", "geometry_msgs/TwistWithCovarianceStamped", "world_frame", check_fix,
            sensor=_velocity, noise_from_message=True, gate_dof=3,

@@ -52,6 +52,41 @@ def quaternion_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
     ])
 
 
+def matrix_quaternion(R: np.ndarray) -> tuple[float, float, float, float]:
+    """The unit quaternion ``(x, y, z, w)`` of a rotation matrix ``(3, 3)`` (inverse of
+    :func:`quaternion_matrix`; Shepperd's choice of the largest component keeps it accurate)."""
+    m = np.asarray(R, dtype=float)
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    k = int(np.argmax([trace, m[0, 0], m[1, 1], m[2, 2]]))
+    if k == 0:
+        s = 2.0 * math.sqrt(1.0 + trace)
+        q = (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, s / 4
+    elif k == 1:
+        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        q = s / 4, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s
+    elif k == 2:
+        s = 2.0 * math.sqrt(1.0 - m[0, 0] + m[1, 1] - m[2, 2])
+        q = (m[0, 1] + m[1, 0]) / s, s / 4, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s
+    else:
+        s = 2.0 * math.sqrt(1.0 - m[0, 0] - m[1, 1] + m[2, 2])
+        q = (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, s / 4, (m[1, 0] - m[0, 1]) / s
+    return tuple(float(v) for v in q)
+
+
+def transform_msg(parent: str, child: str, stamp_ns: int, translation: np.ndarray,
+                  R: np.ndarray) -> TransformStamped:
+    """``geometry_msgs/TransformStamped`` ``parent -> child``: the child's coordinates ``c`` are
+    ``translation (3,) + R (3, 3) c`` in the parent's."""
+    msg = TransformStamped()
+    msg.header.stamp = ns_to_stamp(stamp_ns)
+    msg.header.frame_id, msg.child_frame_id = parent, child
+    t = msg.transform.translation
+    t.x, t.y, t.z = (float(v) for v in translation)
+    q = msg.transform.rotation
+    q.x, q.y, q.z, q.w = matrix_quaternion(R)
+    return msg
+
+
 def imu_specific_force(msg) -> np.ndarray:
     """World-frame specific force ``(3,)`` of a ``sensor_msgs/Imu`` (validated beforehand).
 

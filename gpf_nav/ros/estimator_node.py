@@ -20,7 +20,8 @@ arguments behaves as a plain node; an invalid parameter then stops start-up (exi
 With ``autostart:=false`` it waits, unconfigured, for a lifecycle manager.
 
 TF: with ``publish_tf`` (default true) every odometry message also goes out as ``tf_frame_id ->
-tf_child_frame_id`` on ``/tf`` with tf2's broadcaster QoS, when ``tf2_msgs`` is importable; otherwise
+tf_child_frame_id`` on ``/tf`` with tf2's broadcaster QoS, with ``world_frame -> moon_fixed_frame ->
+site_frame`` at its stamp, when ``tf2_msgs`` is importable; otherwise
 one log line and the ``tf`` key of ``/diagnostics`` say why there is none. Topics, parameters, frames
 and the bad-input rules are documented in ``docs/ros.md``.
 """
@@ -266,7 +267,8 @@ class EstimatorNode(LifecycleNode):
         if topic == "odometry/filtered" and self._tf_publisher is not None:
             p = self.params
             self._tf_publisher.publish(TFMessage(transforms=[
-                conv.odometry_transform(msg, p["tf_frame_id"], p["tf_child_frame_id"])]))
+                conv.odometry_transform(msg, p["tf_frame_id"], p["tf_child_frame_id"]),
+                *self.core.frame_transforms(conv.stamp_to_ns(msg.header.stamp))]))
 
     def _node_status(self) -> list[tuple[str, str]]:
         """The node's own ``/diagnostics`` key/values: TF and messages not processed while inactive."""

@@ -35,11 +35,13 @@ from gpf_nav.estimator.engine import EngineConfig, EstimatorEngine
 from gpf_nav.estimator.factory import make_filter, make_lunar_model
 from gpf_nav.estimator.params import ParameterError, check_estimator_parameters, filter_options
 from gpf_nav.estimator.sensor_setup import build_sensors, gates, with_biases
-from gpf_nav.estimator.streams import STREAMS, Stream
+from gpf_nav.estimator.stations import MoonFrames, station_sensors
+from gpf_nav.estimator.streams import STREAMS, Reading, Stream
 from gpf_nav.estimator.warm_up import warm_up
 from gpf_nav.filters.interface import CLOUD
 from gpf_nav.integrity.consistency import WARN_FALSE_ALARM_RATE
 from gpf_nav.ros.stream_messages import MESSAGE_TYPES
+from gpf_nav.sensors.station import StationSensor
 from gpf_nav.sim.scenario import ScenarioConfig, initial_state
 
 LOG_THROTTLE = 5.0  # s (wall clock) between two log lines about the same refusal reason
@@ -115,6 +117,8 @@ class MessageLayer:
                                           max_step=p["max_step"], gravity_field=p["gravity_field"],
                                           gravity_epoch=p["gravity_epoch"])
             self.sensors = build_sensors(p, self.model, STREAMS)
+            self.stations = station_sensors(p, self.model)
+            self.frames = MoonFrames.from_parameters(p)
             factory = with_biases(lambda m: make_filter(p["filter"], m, **filter_options(p)), self.model,
                                   self.sensors)
             factory()
@@ -138,6 +142,7 @@ class MessageLayer:
         self.wants_particles = wants_particles
         self._handlers = {"imu": self._on_imu, "set_pose": self._on_set_pose, "set_state": self._on_set_state}
         self._last_log: dict[str, float] = {}
+        self._unknown_stations: set[str] = set()
         self._integrity_level = "OK"
         self._last_published_ns: int | None = None
         self._last_now_ns = 0
@@ -219,20 +224,55 @@ class MessageLayer:
                 f"{'none' if last is None else f'{last * 1e-9:.3f} s'}, node clock {now_ns * 1e-9:.3f} s")
 
     def _on_measurement(self, stream: Stream, msg, now_ns: int) -> None:
-        """A message of a measurement stream: header, conversion, the stream's checks, its sensor."""
-        stamp = self._check_header(stream.name, msg.header, self.params[stream.frame])
+        """A message of a measurement stream: header, conversion, the stream's checks, its sensor (a
+        station stream's: the station its frame names; a position in a Moon frame: turned into world_frame)."""
+        frame = self.params[stream.frame]
+        header = msg.header
+        stamp = self._check_header(stream.name, header, "" if stream.station or stream.moon_frames else frame)
         if stamp is None:
+            return
+        station = None
+        if stream.station:
+            known, station = self._station(stream.name, header.frame_id, frame)
+            if not known:
+                return
+        elif stream.moon_frames and header.frame_id not in self.frames.names:
+            self._refuse(stream.name, "wrong_frame", f"frame_id '{header.frame_id}', expected one of "
+                                                     f"{', '.join(self.frames.names)}")
             return
         reading = MESSAGE_TYPES[stream.message].reading(msg)
         ok, reason = stream.check(reading)
         if not ok:
             self._refuse(stream.name, reason, reading.describe())
             return
-        sensor = self.sensors[stream.name]
+        if stream.moon_frames and header.frame_id != self.frames.world:
+            reading = Reading(*self.frames.position_to_world(header.frame_id, reading.values, reading.covariance,
+                                                             stamp * 1e-9))
+        sensor = station or self.sensors[stream.name]
         y = stream.measurement(reading, sensor.dim)
         if stream.noise_from_message:
             sensor = sensor.with_noise(reading.covariance)
-        self._measurement(stream.name, stamp, y, now_ns, None if stream.model_measurement else sensor)
+        model_measurement = stream.model_measurement and station is None
+        self._measurement(stream.name, stamp, y, now_ns, None if model_measurement else sensor)
+
+    def _station(self, stream: str, frame_id: str, default: str) -> tuple[bool, StationSensor | None]:
+        """``(known, sensor)`` of the station ``frame_id`` names: a station of the tables, or None for
+        ``default``'s (the model's own measurement; ``default`` '' takes any other name). An unknown name
+        is refused (``unknown_station``, or ``wrong_frame`` with no station table), logged once per name."""
+        if frame_id in self.stations:
+            return True, self.stations[frame_id]
+        if not default or frame_id == default:
+            return True, None
+        if not self.stations:
+            self._refuse(stream, "wrong_frame", f"frame_id '{frame_id}', expected '{default}'")
+            return False, None
+        n = self.engine.counters.reject(stream, "unknown_station")
+        if frame_id not in self._unknown_stations:
+            self._unknown_stations.add(frame_id)
+            self.logger.warning(f"dropped {stream} message: unknown_station: frame_id '{frame_id}' names no "
+                                f"station (measurement_frame '{default}', stations "
+                                f"{', '.join(sorted(self.stations))}) ({n} so far)")
+        return False, None
 
     def _measurement(self, stream: str, stamp: int, y: np.ndarray, now_ns: int, sensor=None) -> None:
         ok, reason = self.engine.measurement(stamp, y, now_ns, stream, sensor)
@@ -358,6 +398,12 @@ class MessageLayer:
             chosen = particles[conv.decimate(particles, np.asarray(weights), k)][:, list(self.model.position_index)]
             chosen = chosen[np.all(np.isfinite(chosen), axis=1)]
             self.publish("gpf/particles", conv.pose_array_msg(chosen, stamp, p["world_frame"]))
+
+    def frame_transforms(self, stamp_ns: int) -> list:
+        """``geometry_msgs/TransformStamped`` of world_frame -> moon_fixed_frame -> site_frame at ``stamp_ns``
+        (:meth:`gpf_nav.estimator.stations.MoonFrames.transforms`), published on TF with each odometry."""
+        return [conv.transform_msg(parent, child, stamp_ns, translation, R)
+                for parent, child, translation, R in self.frames.transforms(stamp_ns * 1e-9)]
 
     def publish_tick(self, now_ns: int) -> None:
         """The ``publish_rate`` timer: predicted odometry at ``now_ns`` (and a reset if the clock jumped back)."""
