@@ -143,7 +143,7 @@ BAD = [  # (stream, message builder(stamp, good value), reason)
     ("position", lambda t, p: position_msg(t, p, np.diag([2500.0, -1.0, 2500.0])), "not_positive_definite"),
     ("position", lambda t, p: position_msg(t, p, np.zeros((3, 3))), "not_positive_definite"),
     ("position", lambda t, p: position_msg(t, p, np.diag([math.nan] * 3)), "non_finite"),
-    ("position", lambda t, p: position_msg(t, p, np.eye(3) * 2500.0, frame="map"), "wrong_frame"),
+    ("position", lambda t, p: position_msg(t, p, np.eye(3) * 2500.0, frame="odom"), "wrong_frame"),
     ("position", lambda t, p: position_msg(t + 3600 * S, p, np.eye(3) * 2500.0), "future_stamp"),
     ("position", lambda t, p: position_msg(t - 60 * S, p, np.eye(3) * 2500.0), "older_than_history"),
     ("velocity", lambda t, v: velocity_msg(t, [v[0], math.nan, v[2]], np.eye(3) * 0.01), "non_finite"),
