@@ -288,7 +288,9 @@ def test_tf_with_every_odometry_message_received_by_a_subscriber(graph, tf2_msgs
     assert graph.spin_until(lambda: len(graph.odometry) >= 20 and len(transforms) >= 20), log.read_text()
     assert graph.spin_until(lambda: graph.status().get("tf") == "moon_inertial -> vehicle on /tf")
 
-    by_stamp = {conv.stamp_to_ns(t.header.stamp): t for t in transforms}
+    assert {(t.header.frame_id, t.child_frame_id) for t in transforms} == {
+        ("moon_inertial", "vehicle"), ("moon_inertial", "moon_fixed"), ("moon_fixed", "map")}
+    by_stamp = {conv.stamp_to_ns(t.header.stamp): t for t in transforms if t.child_frame_id == "vehicle"}
     matched = 0
     for odom in graph.odometry:
         t = by_stamp.get(conv.stamp_to_ns(odom.header.stamp))
