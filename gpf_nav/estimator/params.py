@@ -69,7 +69,6 @@ ESTIMATOR = [
         Spec("accel_noise_density", 1e-3, "Process-noise white-acceleration density.", "m/s^1.5", ">= 0"),
         Spec("max_step", 10.0, "Longest integration sub-step of the model.", "s", "> 0"),
         Spec("gravity_field", "point", "Gravity beyond the point mass the model integrates: point (none), j2, zonal (J2-J4) or degree4 (DE430's lunar field through degree 4, turning with the Moon).", choices=FIELDS),
-        Spec("gravity_epoch", 0.0, "degree4: the time (header stamps' scale) at which the Moon-fixed frame's x axis is world_frame's x axis.", "s", "finite"),
     ),
     *_group(
         "Frames",
@@ -78,7 +77,7 @@ ESTIMATOR = [
         Spec("measurement_frame", "station", "header.frame_id of measurements/rae and measurements/range from the station parameter's station ('' = any frame that names no other station); measurements/position may be in world_frame, moon_fixed_frame or site_frame, measurements/velocity must be in world_frame."),
         Spec("imu_frame", "base_link", "Required header.frame_id of imu ('' = any)."),
         Spec("moon_fixed_frame", "moon_fixed", "The Moon-fixed frame (turning with the Moon about world_frame's z axis at 2.6617e-6 rad/s) on TF and in measurements/position header.frame_id.", bounds="non-empty"),
-        Spec("moon_epoch", 0.0, "The time (header stamps' scale) at which moon_fixed_frame's x axis is world_frame's x axis.", "s", "finite"),
+        Spec("moon_epoch", 0.0, "The time (header stamps' scale) at which moon_fixed_frame's x axis is world_frame's x axis; also the phase of gravity_field degree4.", "s", "finite"),
         Spec("site_frame", "map", "The landing site's east-north-up frame (REP 105 map) on TF and in measurements/position header.frame_id.", bounds="non-empty"),
         Spec("site_latitude", 0.0, "Latitude of site_frame's origin (spherical, REP 103).", "rad", "[-1.5707963267948966, 1.5707963267948966]"),
         Spec("site_longitude", 0.0, "Longitude of site_frame's origin, east positive.", "rad", "finite"),

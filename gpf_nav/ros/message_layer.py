@@ -115,7 +115,7 @@ class MessageLayer:
                                           angle_noise_std=p["angle_noise_std"],
                                           accel_noise_density=p["accel_noise_density"],
                                           max_step=p["max_step"], gravity_field=p["gravity_field"],
-                                          gravity_epoch=p["gravity_epoch"])
+                                          gravity_epoch=p["moon_epoch"])
             self.sensors = build_sensors(p, self.model, STREAMS)
             self.stations = station_sensors(p, self.model)
             self.frames = MoonFrames.from_parameters(p)
