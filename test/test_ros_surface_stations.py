@@ -22,6 +22,7 @@ from gpf_nav.ros import conversions as conv  # noqa: E402
 from gpf_nav.ros.estimator_node import EstimatorNode  # noqa: E402
 from gpf_nav.ros.simulator_node import SimulatorNode  # noqa: E402
 from gpf_nav.sim.scenario import ScenarioConfig, generate  # noqa: E402
+from gpf_nav.sim.simulator_params import check_simulator_parameters, simulator_specs  # noqa: E402
 from gpf_nav.sim.surface_stations import surface_measurements  # noqa: E402
 from test_ros_sensors import Ros, _status  # noqa: E402
 
@@ -53,6 +54,31 @@ def test_visibility_of_the_two_beacons_offline():
     assert seen["north_beacon"].all()
     assert 20 < seen["west_beacon"].sum() < len(scenario.times) and seen["west_beacon"][0]
     assert not seen["west_beacon"][seen["west_beacon"].sum():].any()  # one pass: set, never back
+
+
+def test_surface_stations_reproducible_and_independent_of_each_other():
+    """Same seed, same arrays; a station's data do not change when another joins the table."""
+    scenario = generate(ScenarioConfig(duration=60.0), 3)
+    both = surface_measurements(scenario, BEACONS, START, START, 3)
+    again = surface_measurements(scenario, BEACONS, START, START, 3)
+    alone = surface_measurements(scenario, {"north_beacon": BEACONS["north_beacon"]}, START, START, 3)
+    assert all(np.array_equal(both[n], again[n], equal_nan=True) for n in BEACONS)
+    assert np.array_equal(both["north_beacon"], alone["north_beacon"])
+    other = surface_measurements(scenario, BEACONS, START, START, 4)
+    assert not np.array_equal(both["north_beacon"], other["north_beacon"])
+
+
+@pytest.mark.parametrize("changes, text", [
+    ({"station_lat_lon_height": [0.1, 0.2]}, "has 2 numbers"),
+    ({"station_lat_lon_height": [2.0, 0.2, 0.0, 0.0, 0.0, 0.0]}, "latitude must lie in"),
+    ({"station_names": ["a", "a"]}, "station name(s) a given more than once"),
+    ({"station_names": ["station", "b"]}, "station name(s) station given more than once or equal"),
+    ({"loop": True}, "drawn for the first lap only"),
+])
+def test_station_parameters_are_checked(changes, text):
+    p = {spec.name: spec.default for spec in simulator_specs()}
+    p.update({"station_names": ["a", "b"], "station_lat_lon_height": [0.0] * 6, **changes})
+    assert any(text in e for e in check_simulator_parameters(p)), check_simulator_parameters(p)
 
 
 def _chain_position(est, stamp_ns: int, r: np.ndarray) -> np.ndarray:

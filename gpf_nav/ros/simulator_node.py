@@ -6,9 +6,9 @@ Generates the truth with the core scenario generator (or replays a CSV truth, pa
 ``measurements/altitude``, ``measurements/velocity`` and ``measurements/position`` (TRN fixes published
 ``suite.trn_latency`` s after their stamp, the image capture); with ``station_names`` also
 ``measurements/rae`` from each surface station that sees the vehicle, named in ``header.frame_id``
-(:mod:`gpf_nav.sim.surface_stations`). A wall-clock loop at ``clock_rate`` Hz advances simulated time by ``rate_factor`` times
-the elapsed wall time, publishes ``/clock`` and releases every event of :mod:`gpf_nav.sim.playback`
-due by then, with the event's own stamp; so message contents never depend on timing: same seed, same
+(:mod:`gpf_nav.sim.surface_stations`). A wall-clock loop at ``clock_rate`` Hz advances simulated time by
+``rate_factor`` times the elapsed wall time, publishes ``/clock`` and releases every event of
+:mod:`gpf_nav.sim.playback` due by then, with the event's own stamp; so message contents never depend on timing: same seed, same
 messages. By default simulated time starts at the wall-clock time (``start_time`` negative), so at
 ``rate_factor`` 1 an estimator on the wall clock accepts the stamps, and the mission's prior is handed
 over on ``set_state`` (latched) when the trajectory starts. See ``docs/ros.md``.
@@ -156,8 +156,8 @@ class SimulatorNode(Node):
         finished: True once the trajectory has ended and ``loop`` is false.
         trajectory_ns: trajectory time reached by the release loop in the current lap [ns] (0 before
             the start).
-        published: messages published per kind (``measurement``, ``station`` (surface stations), ``imu``, ``truth``, ``clock``, ``handover``,
-            ``altitude``, ``velocity``, ``position``).
+        published: messages published per kind (``measurement``, ``station`` (surface stations), ``imu``,
+            ``truth``, ``clock``, ``handover``, ``altitude``, ``velocity``, ``position``).
     """
 
     def __init__(self, name: str = NODE_NAME, params_files=(), **kwargs):
@@ -183,8 +183,8 @@ class SimulatorNode(Node):
             if len(self.scenario.times) > 1 else NS
         self.finished = False
         self.trajectory_ns = 0
-        self.published = {"measurement": 0, "station": 0, "imu": 0, "truth": 0, "clock": 0, "handover": 0, "altitude": 0,
-                           "velocity": 0, "position": 0}
+        self.published = {"measurement": 0, "station": 0, "imu": 0, "truth": 0, "clock": 0, "handover": 0,
+                           "altitude": 0, "velocity": 0, "position": 0}
         self._index = 0
         self._lap_offset_ns = 0
         self._handover_due = p["hand_over_prior"]

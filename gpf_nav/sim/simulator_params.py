@@ -1,7 +1,7 @@
 """The simulator node's parameter schema: its own parameters, ``scenario.<field>`` for the
 :class:`~gpf_nav.sim.scenario.ScenarioConfig` fields it exposes and ``suite.<field>`` for every
 :class:`~gpf_nav.sim.sensor_suite.SuiteConfig` field (defaults taken from those classes, which check
-them), and the rule that ties two of them together. No ROS here.
+them), and the rules that tie some of them together. No ROS here.
 """
 from __future__ import annotations
 
@@ -116,6 +116,9 @@ def check_simulator_parameters(p: dict) -> list[str]:
     repeated = sorted({n for n in names if names.count(n) > 1} | set(names) & {p["measurement_frame"]})
     if repeated:
         errors.append(f"station name(s) {', '.join(repeated)} given more than once or equal to measurement_frame")
+    if names and p["loop"]:
+        errors.append("parameter 'station_names' with loop: true: the surface stations' measurements are drawn "
+                      "for the first lap only (the Moon has turned further in the next)")
     if not p["publish_clock"] and p["rate_factor"] != 1.0:
         errors.append("parameter 'rate_factor' != 1 needs publish_clock: true (stamps would run ahead "
                       "of the wall clock)")
