@@ -111,7 +111,7 @@ def test_two_surface_beacons_simulated_and_tracked_in_the_site_frame(ros):
         refused = sum(n for (stream, _), n in counters.rejected_by_stream.items() if stream == "rae")
         return counters.accepted["rae"] + refused >= sim.published["measurement"] + sim.published["station"]
 
-    assert ros.spin_until(processed, 180.0), (counters.accepted, counters.rejected_by_stream, sim.published)
+    assert ros.spin_until(processed, 300.0), (counters.accepted, counters.rejected_by_stream, sim.published)
     # the simulator sent what the offline scenario predicts, each message named by its station
     expected = surface_measurements(sim.scenario, BEACONS, START, START, 0)
     assert sim.published["station"] == sum(int(np.isfinite(y[:, 0]).sum()) for y in expected.values())
