@@ -240,7 +240,7 @@ def test_simulator_and_estimator_processes_exchange_every_sensor(ros, tmp_path):
                 "-p", "suite.velocimeter_max_altitude:=1000000.0"]
     p = parameters_from_files(simulator_specs(), "lunar_simulator", [ROOT / "config/simulator.yaml"],
                               sim_args[1::2])
-    events = events_from_parameters(scenario_from_parameters(p)[1], p)
+    events = events_from_parameters(scenario_from_parameters(p)[1], p, 1000.0)
     expected = {s: sum(e.kind == k for e in events) for s, k in
                 (("rae", "measurement"), ("position", "position"), ("velocity", "velocity"), ("altitude", "altitude"))}
     diagnostics = ros.record(DiagnosticArray, "/diagnostics")

@@ -72,16 +72,16 @@ def record(out: str, p: dict, storage: str = "mcap") -> dict:
                                             event_message, events_from_parameters, handover_message,
                                             scenario_from_parameters)
     errors = check_simulator_parameters(p)
+    clock = p["publish_clock"]
+    epoch = int(round(p["start_time"] * NS)) if clock and p["start_time"] >= 0.0 else time.time_ns()
     if not errors:
         try:
             _, scenario = scenario_from_parameters(p)
-            events = events_from_parameters(scenario, p)
+            events = events_from_parameters(scenario, p, epoch / NS)
         except (ValueError, OSError) as err:
             errors.append(f"scenario: {err}")
     if errors:
         raise ParameterError("invalid parameters: " + "; ".join(errors))
-    clock = p["publish_clock"]
-    epoch = int(round(p["start_time"] * NS)) if clock and p["start_time"] >= 0.0 else time.time_ns()
     span = max(e.t_ns for e in events)
     period = int(round(NS / p["clock_rate"]))
     qos = qos_profile(reliable=True, depth=QOS_DEPTH)

@@ -4,9 +4,11 @@ Generates the truth with the core scenario generator (or replays a CSV truth, pa
 ``truth_csv``) and publishes, in simulated time, ``measurements/rae``, ``imu``, ``truth/odometry`` and
 ``/clock``; with ``publish_suite`` also the sensor suite of :mod:`gpf_nav.sim.sensor_suite` (``suite.*``):
 ``measurements/altitude``, ``measurements/velocity`` and ``measurements/position`` (TRN fixes published
-``suite.trn_latency`` s after their stamp, the image capture). A wall-clock loop at ``clock_rate`` Hz advances simulated time by ``rate_factor`` times
-the elapsed wall time, publishes ``/clock`` and releases every event of :mod:`gpf_nav.sim.playback`
-due by then, with the event's own stamp; so message contents never depend on timing: same seed, same
+``suite.trn_latency`` s after their stamp, the image capture); with ``station_names`` also
+``measurements/rae`` from each surface station that sees the vehicle, named in ``header.frame_id``
+(:mod:`gpf_nav.sim.surface_stations`). A wall-clock loop at ``clock_rate`` Hz advances simulated time by
+``rate_factor`` times the elapsed wall time, publishes ``/clock`` and releases every event of
+:mod:`gpf_nav.sim.playback` due by then, with the event's own stamp; so message contents never depend on timing: same seed, same
 messages. By default simulated time starts at the wall-clock time (``start_time`` negative), so at
 ``rate_factor`` 1 an estimator on the wall clock accepts the stamps, and the mission's prior is handed
 over on ``set_state`` (latched) when the trajectory starts. See ``docs/ros.md``.
@@ -50,7 +52,8 @@ def scenario_from_parameters(p: dict):
     return config, generate(config, p["seed"])
 
 
-EVENT_TOPICS = {"measurement": ("measurements/rae", Vector3Stamped), "truth": ("truth/odometry", Odometry),
+EVENT_TOPICS = {"measurement": ("measurements/rae", Vector3Stamped),
+                "station": ("measurements/rae", Vector3Stamped), "truth": ("truth/odometry", Odometry),
                 "imu": ("imu", Imu), "altitude": ("measurements/altitude", Range),
                 "velocity": ("measurements/velocity", TwistWithCovarianceStamped),
                 "position": ("measurements/position", PoseWithCovarianceStamped)}
@@ -73,10 +76,23 @@ def suite_from_parameters(scenario, p: dict):
     return generate_suite(scenario, config, p["seed"])
 
 
-def events_from_parameters(scenario, p: dict) -> list:
-    """The playback events of ``scenario`` (and its sensor suite) for simulator parameters ``p``."""
+def stations_from_parameters(scenario, p: dict, start_stamp: float) -> dict | None:
+    """``{name: (K, 3)}`` of :func:`gpf_nav.sim.surface_stations.surface_measurements` for the surface stations
+    of ``p`` (checked by :func:`check_simulator_parameters`) with the trajectory starting at stamp
+    ``start_stamp`` s, or None without any."""
+    if not p["station_names"]:
+        return None
+    from gpf_nav.sim.surface_stations import surface_measurements
+    table = np.reshape(p["station_lat_lon_height"], (-1, 3)).tolist()
+    return surface_measurements(scenario, dict(zip(p["station_names"], table)), p["moon_epoch"], start_stamp,
+                                p["seed"])
+
+
+def events_from_parameters(scenario, p: dict, start_stamp: float) -> list:
+    """The playback events of ``scenario`` (its sensor suite and surface stations) for simulator parameters
+    ``p``, the trajectory starting at stamp ``start_stamp`` s."""
     return build_events(scenario, p["imu_rate"], p["imu_noise_std"], p["truth_rate"], p["seed"],
-                        suite_from_parameters(scenario, p))
+                        suite_from_parameters(scenario, p), stations_from_parameters(scenario, p, start_stamp))
 
 
 def _covariance6(std: float) -> np.ndarray:
@@ -112,6 +128,8 @@ def event_message(event, stamp_ns: int, p: dict) -> tuple[str, object]:
         return "measurements/position", msg
     if event.kind == "measurement":
         return "measurements/rae", conv.vector3_stamped(event.data, stamp_ns, p["measurement_frame"])
+    if event.kind == "station":
+        return "measurements/rae", conv.vector3_stamped(event.data, stamp_ns, event.frame)
     if event.kind == "truth":
         return "truth/odometry", conv.odometry_msg(np.array(event.data), np.zeros((6, 6)), stamp_ns,
                                                    p["world_frame"], p["base_frame"])
@@ -138,8 +156,8 @@ class SimulatorNode(Node):
         finished: True once the trajectory has ended and ``loop`` is false.
         trajectory_ns: trajectory time reached by the release loop in the current lap [ns] (0 before
             the start).
-        published: messages published per kind (``measurement``, ``imu``, ``truth``, ``clock``, ``handover``,
-            ``altitude``, ``velocity``, ``position``).
+        published: messages published per kind (``measurement``, ``station`` (surface stations), ``imu``,
+            ``truth``, ``clock``, ``handover``, ``altitude``, ``velocity``, ``position``).
     """
 
     def __init__(self, name: str = NODE_NAME, params_files=(), **kwargs):
@@ -148,10 +166,14 @@ class SimulatorNode(Node):
         warn_undeclared(self)
         warn_unmatched_params_files(self, params_files)
         errors = check_simulator_parameters(p)
+        if p["publish_clock"] and p["start_time"] >= 0.0:
+            self._epoch_ns = int(round(p["start_time"] * 1e9))
+        else:  # the wall-clock time when the trajectory starts
+            self._epoch_ns = Clock(clock_type=ClockType.SYSTEM_TIME).now().nanoseconds + int(p["start_delay"] * NS)
         if not errors:
             try:
                 self.config, self.scenario = scenario_from_parameters(p)
-                self.events = events_from_parameters(self.scenario, p)
+                self.events = events_from_parameters(self.scenario, p, self._epoch_ns * 1e-9)
             except (ValueError, OSError) as err:
                 errors.append(f"scenario: {err}")
         if errors:
@@ -161,22 +183,18 @@ class SimulatorNode(Node):
             if len(self.scenario.times) > 1 else NS
         self.finished = False
         self.trajectory_ns = 0
-        self.published = {"measurement": 0, "imu": 0, "truth": 0, "clock": 0, "handover": 0, "altitude": 0,
-                           "velocity": 0, "position": 0}
+        self.published = {"measurement": 0, "station": 0, "imu": 0, "truth": 0, "clock": 0, "handover": 0,
+                           "altitude": 0, "velocity": 0, "position": 0}
         self._index = 0
         self._lap_offset_ns = 0
         self._handover_due = p["hand_over_prior"]
         self._wall_start = time.monotonic() + p["start_delay"]
-        if p["publish_clock"] and p["start_time"] >= 0.0:
-            self._epoch_ns = int(round(p["start_time"] * 1e9))
-        else:  # the wall-clock time when the trajectory starts
-            self._epoch_ns = Clock(clock_type=ClockType.SYSTEM_TIME).now().nanoseconds + int(p["start_delay"] * NS)
 
         qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                          depth=QOS_DEPTH)
         kinds = {"measurement", "truth", "imu"} | {e.kind for e in self.events}
         self._publishers_by_topic = {topic: self.create_publisher(msg_type, topic, qos)
-                                     for kind, (topic, msg_type) in EVENT_TOPICS.items() if kind in kinds}
+                                     for topic, msg_type in {EVENT_TOPICS[kind] for kind in kinds}}
         self.clock_pub = self.create_publisher(ClockMsg, "/clock", qos) if p["publish_clock"] else None
         latched = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=1,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)  # an estimator started later gets it

@@ -9,11 +9,13 @@
   truth samples by cubic Hermite interpolation of positions and velocities;
 * ``imu`` every ``1 / imu_rate`` s: the specific force held over the scenario step that contains the
   time, plus white noise of ``imu_noise_std`` per axis from a stream seeded by ``seed``;
+* ``station`` at every ``scenario.times[k]`` at which a surface station (its name the event's ``frame``)
+  sees the vehicle (:func:`gpf_nav.sim.surface_stations.surface_measurements`), one event per station;
 * with a sensor suite (:func:`gpf_nav.sim.sensor_suite.generate_suite`): ``altitude`` and ``velocity`` at
   the times they measure, and ``position`` (a TRN fix) released at its arrival time, ``delay_ns`` after
   its capture, which is its stamp.
 
-At equal times the order is measurement, altitude, velocity, position, truth, imu, so an estimator that applies the latest IMU sample
+At equal times the order is measurement, station (in the table's order), altitude, velocity, position, truth, imu, so an estimator that applies the latest IMU sample
 stamped strictly before a measurement uses the force of the step that measurement closes.
 Same inputs and seed, same events.
 """
@@ -24,15 +26,16 @@ from dataclasses import dataclass
 import numpy as np
 
 NS = 1_000_000_000
-_ORDER = {"measurement": 0, "altitude": 1, "velocity": 2, "position": 3, "truth": 4, "imu": 5}
+_ORDER = {"measurement": 0, "station": 1, "altitude": 2, "velocity": 3, "position": 4, "truth": 5, "imu": 6}
 
 
 @dataclass(frozen=True)
 class Event:
     t_ns: int                 # from the trajectory start, when the message goes out
-    kind: str                 # measurement | truth | imu | altitude | velocity | position
+    kind: str                 # measurement | station | truth | imu | altitude | velocity | position
     data: tuple[float, ...]   # (range, az, el) | (x, y, z, vx, vy, vz) | (ax, ay, az) | (h,) | (vx, vy, vz) | (x, y, z)
     delay_ns: int = 0         # the message is stamped this long before it goes out (TRN latency)
+    frame: str = ""           # station: the station's name (the message's header.frame_id)
 
 
 def _grid(span_ns: int, rate: float) -> np.ndarray:
@@ -55,9 +58,10 @@ def hermite_state(t0: float, x0: np.ndarray, t1: float, x1: np.ndarray, t: float
 
 
 def build_events(scenario, imu_rate: float, imu_noise_std: float, truth_rate: float,
-                 seed: int, suite=None) -> list[Event]:
-    """The time-ordered events of ``scenario`` and of ``suite`` (a
-    :class:`gpf_nav.sim.sensor_suite.SuiteData` of it, or None) (see the module docstring)."""
+                 seed: int, suite=None, stations: dict[str, np.ndarray] | None = None) -> list[Event]:
+    """The time-ordered events of ``scenario``, of ``suite`` (a :class:`gpf_nav.sim.sensor_suite.SuiteData`
+    of it, or None) and of ``stations`` (``{name: (K, 3)}`` of
+    :func:`gpf_nav.sim.surface_stations.surface_measurements`, or None) (see the module docstring)."""
     t_truth = np.concatenate([[scenario.start_time], scenario.times]) - scenario.start_time
     t_truth_ns = np.round(t_truth * NS).astype(np.int64)
     span_ns = int(t_truth_ns[-1])
@@ -87,6 +91,9 @@ def build_events(scenario, imu_rate: float, imu_noise_std: float, truth_rate: fl
         events.append(Event(int(t), "imu", tuple(float(v) for v in force)))
     if suite is not None:
         events += suite_events(scenario, suite)
+    for name, values in (stations or {}).items():
+        for k in np.flatnonzero(np.all(np.isfinite(values), axis=1)).tolist():
+            events.append(Event(int(t_truth_ns[k + 1]), "station", tuple(float(v) for v in values[k]), frame=name))
     events.sort(key=lambda e: (e.t_ns, _ORDER[e.kind]))
     return events
 

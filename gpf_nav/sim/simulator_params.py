@@ -1,10 +1,11 @@
 """The simulator node's parameter schema: its own parameters, ``scenario.<field>`` for the
 :class:`~gpf_nav.sim.scenario.ScenarioConfig` fields it exposes and ``suite.<field>`` for every
 :class:`~gpf_nav.sim.sensor_suite.SuiteConfig` field (defaults taken from those classes, which check
-them), and the rule that ties two of them together. No ROS here.
+them), and the rules that tie some of them together. No ROS here.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 from gpf_nav.schema import Spec, check
@@ -32,6 +33,9 @@ NODE = [
     Spec("base_frame", "base_link", "child_frame_id of truth/odometry."),
     Spec("measurement_frame", "station", "frame_id of measurements/rae."),
     Spec("imu_frame", "base_link", "frame_id of imu."),
+    Spec("station_names", None, "Surface stations on the rotating Moon, as the estimator's: each publishes measurements/rae with its name as header.frame_id at every measurement time it sees the vehicle (elevation > 0), besides the station's.", item="string"),
+    Spec("station_lat_lon_height", None, "Latitude (rad), longitude (rad, east positive) and height (m above the mean radius) of each of station_names in turn, 3 numbers per station.", "rad, rad, m", "finite"),
+    Spec("moon_epoch", 0.0, "The stamp (start_time + scenario time) at which the Moon-fixed x axis is world_frame's x axis: the surface stations turn with the Moon from there (the estimator's moon_epoch).", "s", "finite"),
 ]
 
 SCENARIO = [  # name, description, unit, choices
@@ -103,6 +107,18 @@ def simulator_specs() -> list[Spec]:
 def check_simulator_parameters(p: dict) -> list[str]:
     """Errors in the simulator's own parameters (the scenario's and the suite's are their classes' to check)."""
     errors = check(NODE, p)
+    names, values = p["station_names"] or [], p["station_lat_lon_height"] or []
+    if len(values) != 3 * len(names):
+        errors.append(f"parameter 'station_lat_lon_height' has {len(values)} numbers; 'station_names' names "
+                      f"{len(names)} station(s), 3 numbers each")
+    if any(abs(lat) > math.pi / 2 for lat in values[::3]):
+        errors.append("parameter 'station_lat_lon_height': a latitude must lie in [-pi/2, pi/2] rad")
+    repeated = sorted({n for n in names if names.count(n) > 1} | set(names) & {p["measurement_frame"]})
+    if repeated:
+        errors.append(f"station name(s) {', '.join(repeated)} given more than once or equal to measurement_frame")
+    if names and p["loop"]:
+        errors.append("parameter 'station_names' with loop: true: the surface stations' measurements are drawn "
+                      "for the first lap only (the Moon has turned further in the next)")
     if not p["publish_clock"] and p["rate_factor"] != 1.0:
         errors.append("parameter 'rate_factor' != 1 needs publish_clock: true (stamps would run ahead "
                       "of the wall clock)")
