@@ -17,7 +17,10 @@ of ROS time. Rules:
   input, and the later inputs are re-applied; the result equals in-order delivery bit for bit. Older stamps are refused (``older_than_history``), and so are
   stamps within it but before the filter's (re-)initialisation (``stale_stamp``); more than ``max_future`` s ahead of the
   node clock too (``future_stamp``). With ``history_length`` 0 every stamp before the filter's time is
-  ``stale_stamp``.
+  ``stale_stamp``. Re-application is paid from a budget in seconds of stamps
+  (:class:`gpf_nav.estimator.input_checks.ReapplyBudget`: ``reapply_budget`` s per second of the filter's time,
+  at most ``history_length`` s saved up): a late measurement whose lateness exceeds what is left is refused
+  (``reapply_budget``), so a stream of late data cannot take more than that share of the work.
 * An IMU sample delivered after a measurement stamped after it (the topics arrive in any order) that
   should have been that measurement's input re-applies the history from there in the same way
   (``late_imu_count``), so the estimate does not depend on the order of the two topics. The
@@ -60,7 +63,7 @@ from gpf_nav.integrity import ConsistencyMonitor, ConsistencyStatus, CostateMoni
 from gpf_nav.estimator.history import Entry, History
 from gpf_nav.estimator.initialization import batch_initial_state
 from gpf_nav.sensors import ModelSensor, innovation_distance
-from gpf_nav.estimator.input_checks import Counters, RateLimiter, check_timing
+from gpf_nav.estimator.input_checks import Counters, RateLimiter, ReapplyBudget, check_timing
 
 NS = 1_000_000_000
 LATE_IMU_MEMORY = 50
@@ -90,6 +93,7 @@ class EngineConfig:
     monitor_hold: float = 5.0               # s (steady clock) a monitor WARN/FAULT stays reported; < 0: until reset
     consistency: dict | None = field(default_factory=dict)  # ConsistencyMonitor keyword arguments; None: disabled
     history_length: float = 10.0            # s, late measurements within this are fused at their stamp; 0: none
+    reapply_budget: float = 0.5             # s of lateness re-applied per s of filter time (ReapplyBudget); 0: unlimited
     gates: dict = field(default_factory=dict)  # stream -> chi-square probability of its innovation gate; 0: off
     gate_limit: int = 5                     # after this many gate refusals in a row the next one is used
 
@@ -205,6 +209,7 @@ class EstimatorEngine:
         self._good: tuple[np.ndarray, np.ndarray, int] | None = None
         self._imu: deque[tuple[int, np.ndarray]] = deque(maxlen=IMU_SAMPLES)
         self.history = History(int(round(self.config.history_length * NS)))
+        self._budget = ReapplyBudget(self.config.reapply_budget, self.config.history_length, 0)
         self._streaks: dict[str, int] = {}   # gate refusals in a row per stream
         self.late_count = 0                   # late measurements fused at their stamp
         self.late_imu_count = 0               # IMU samples that came after a measurement that needed them
@@ -245,6 +250,7 @@ class EstimatorEngine:
         self.init_source = source
         self._init_buffer = []
         self.history.clear()
+        self._budget = ReapplyBudget(self.config.reapply_budget, self.config.history_length, t_ns)
         self._late_imu_ns = None
         self._streaks = {}
         self._reset_monitor()
@@ -279,6 +285,8 @@ class EstimatorEngine:
             ok, reason = self._late_allowed(stamp_ns)
         if ok and not self._rate.allow(self.monotonic()):
             ok, reason = False, "rate_limit"
+        if ok and late and not self._budget.spend(self.t_ns, (self.t_ns - stamp_ns) * 1e-9):
+            ok, reason = False, "reapply_budget"
         if ok and not self.initialized and sensor is not None and self.config.initial_state is None:
             ok, reason = False, "not_initialized"  # only the model's own measurements initialise
         if not ok:

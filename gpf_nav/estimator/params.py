@@ -82,6 +82,7 @@ ESTIMATOR = [
         "Timing and input handling",
         Spec("publish_rate", 10.0, "Rate of predicted odometry between measurements (node clock); 0 disables.", "Hz", ">= 0"),
         Spec("max_future", 1.0, "Refuse stamps more than this ahead of the node clock.", "s", "> 0"),
+        Spec("reset_on_time_jump", True, "Reset the filter when the node clock jumps back by more than 1 s (a restarted simulator or bag), checked on every input and every diagnostics_period, whatever publish_rate; false: the jump is only counted and logged."),
         Spec("imu_timeout", 1.0, "An IMU sample older than this (relative to the measurement) is not used.", "s", "> 0"),
         Spec("max_extrapolation", 300.0, "Do not publish predictions more than this past the last measurement.", "s", "> 0"),
         Spec("max_measurement_rate", 1000.0, "Process at most this many measurements per second (steady clock); 0: unlimited.", "Hz", ">= 0"),
@@ -91,6 +92,7 @@ ESTIMATOR = [
     *_group(
         "Measurement streams (gpf_nav.estimator.streams), late measurements",
         Spec("history_length", 10.0, "A measurement stamped up to this long before the filter's time is fused at its stamp (the later inputs are re-applied); older ones are refused; 0: none.", "s", ">= 0"),
+        Spec("reapply_budget", 0.5, "Seconds of lateness that late measurements may have re-applied per second of the filter's time (at most history_length s saved up, full at start): one whose lateness exceeds what is left is refused (reapply_budget); 0: unlimited.", "s/s", ">= 0"),
         *stream_parameters(STREAMS),
         Spec("gate_limit", 5, "After this many refusals of a gate in a row the next measurement of that stream is used.", bounds=">= 0"),
     ),

@@ -43,6 +43,8 @@ from gpf_nav.ros.stream_messages import MESSAGE_TYPES
 from gpf_nav.sim.scenario import ScenarioConfig, initial_state
 
 LOG_THROTTLE = 5.0  # s (wall clock) between two log lines about the same refusal reason
+TIME_JUMP_NS = 1_000_000_000
+"""A node clock that goes back by more than this (ns) between two calls has jumped (a restarted simulator or bag)."""
 
 CONTROL_TOPICS = {"imu": ("imu", Imu), "set_pose": ("set_pose", PoseWithCovarianceStamped),
                   "set_state": ("set_state", Odometry)}
@@ -127,7 +129,8 @@ class MessageLayer:
             max_measurement_rate=p["max_measurement_rate"], max_extrapolation=p["max_extrapolation"],
             reinit_hold=p["reinit_hold"], monitor=monitor_options(p), monitor_hold=p["monitor_hold"],
             consistency=consistency_options(p),
-            history_length=p["history_length"], gates=gates(p, STREAMS), gate_limit=p["gate_limit"])
+            history_length=p["history_length"], reapply_budget=p["reapply_budget"], gates=gates(p, STREAMS),
+            gate_limit=p["gate_limit"])
         self.engine = EstimatorEngine(factory, self.model, config, monotonic=monotonic)
         self.thresholds = diag.Thresholds(ess_warn=p["ess_warn_threshold"],
                                           costate_warn=p["costate_warn_threshold"],
@@ -140,6 +143,7 @@ class MessageLayer:
         self._integrity_level = "OK"
         self._last_published_ns: int | None = None
         self._last_now_ns = 0
+        self.time_jumps = 0                   # backward jumps of the node clock seen
 
     def describe(self) -> str:
         """One line: filter, N, world frame and where the initial state comes from."""
@@ -170,6 +174,7 @@ class MessageLayer:
         """Process one message of ``stream`` (a name of :attr:`inputs`)
         received at node time ``now_ns``. An unexpected exception is counted (``internal_error``) and
         logged, never raised."""
+        self._watch_clock(now_ns)
         try:
             if stream in self.streams:
                 self._on_measurement(self.streams[stream], msg, now_ns)
@@ -361,12 +366,7 @@ class MessageLayer:
         """The ``publish_rate`` timer: predicted odometry at ``now_ns`` (and a reset if the clock jumped back)."""
         if not now_ns:
             return
-        if now_ns < self._last_now_ns - 1_000_000_000:
-            self.logger.warning(f"node clock jumped back from {self._last_now_ns * 1e-9:.3f} s to "
-                                f"{now_ns * 1e-9:.3f} s: resetting the filter")
-            self.engine.reset()
-            self._last_published_ns = None
-        self._last_now_ns = now_ns
+        self._watch_clock(now_ns)
         if not self.engine.initialized:
             return
         if self._last_published_ns is not None and now_ns <= self._last_published_ns:
@@ -375,10 +375,32 @@ class MessageLayer:
         if est is not None:
             self._publish(now_ns, est[0], est[1], update=False)
 
+    def _watch_clock(self, now_ns: int) -> None:
+        """Reset the filter (``reset_on_time_jump``) when the node clock went back by more than
+        :data:`TIME_JUMP_NS` since the last call; every input and timer tick calls this, so a jump is seen
+        at the first of them after it, whatever ``publish_rate``. Counted in ``time_jumps``."""
+        if not now_ns:  # a simulated clock that has not ticked yet
+            return
+        last, self._last_now_ns = self._last_now_ns, now_ns
+        if now_ns >= last - TIME_JUMP_NS:
+            return
+        self.time_jumps += 1
+        jump = f"node clock jumped back from {last * 1e-9:.3f} s to {now_ns * 1e-9:.3f} s"
+        if not self.params["reset_on_time_jump"]:
+            self.logger.warning(f"{jump} ({self.time_jumps} so far); reset_on_time_jump is false: the filter "
+                                "keeps its state and refuses the stamps before it")
+            return
+        self.engine.reset()
+        self._last_published_ns = None
+        self.logger.warning(f"{jump}: filter reset ({self.time_jumps} so far); it re-initialises from "
+                            + (self.engine.init_source or "set_state, set_pose or the next measurements"))
+
     def diagnostics_tick(self, now_ns: int, uptime: float, hardware_id: str) -> tuple[int, str]:
         """The ``diagnostics_period`` timer: publish ``/diagnostics``; returns ``(level, message)``."""
+        self._watch_clock(now_ns)
         level, message, values = diag.filter_status(self.engine, now_ns, self.thresholds, self.filter_name,
                                                     uptime=uptime)
+        values.append(("node clock jumps back", str(self.time_jumps)))
         self.publish("/diagnostics", diag.to_msg(level, message, values, conv.ns_to_stamp(now_ns),
                                                  hardware_id=hardware_id))
         if not self.engine.initialized and self._throttled("_not_initialized"):
