@@ -158,3 +158,34 @@ def test_stream_of_late_measurements_is_held_to_the_budget_over_dds(ros):
     assert engine.replayed_count - replayed <= sum(expected) * (lag + 4)
     assert probe.odometry_at(probe.stamp(20 + n_late - 1))
     _assert_diagnostics_finite(probe.diagnostics)
+
+
+@pytest.mark.parametrize("action", ["measurements", "prior"])
+def test_persistent_integrity_fault_reinitialises_over_dds(ros, action):
+    probe = _Probe(ros, generate(SCENARIO, 2), integrity_fault_action=action, integrity_fault_updates=3)
+    n_clean = 100  # the monitor is ready after (6 + 1) * (10 + 2) = 84 updates
+    for k in range(n_clean):
+        probe.step(k)
+    engine = probe.est.engine
+    assert engine.init_source == "parameters"
+    k = n_clean
+    while engine.initialized and engine.init_source == "parameters" and k < n_clean + 30:  # a +3 km range bias until the filter gives up
+        probe.step(k, bias=3000.0)
+        k += 1
+    assert k < n_clean + 30, f"30 updates after the bias the filter still holds {engine.init_source}'s state"
+    values = probe.values(lambda v: v.get("integrity fault reinitializations") == "1")
+    assert int(values["integrity fault updates"]) >= 3 and values["reinitializations"] == "1"
+    assert "integrity FAULT for 3 updates in a row" in engine.last_reinit_reason
+    if action == "prior":
+        assert values["initialized from"] == "prior" and probe.odometry_at(probe.stamp(k - 1))
+        first = k
+    else:
+        assert values["initialized"] == "false"
+        for j in range(k, k + 10):  # the batch fit of init_window clean measurements
+            probe.step(j)
+        first = k + 9
+        values = probe.values(lambda v: v["initialized"] == "true")
+        assert values["initialized from"] == "measurements"
+    probe.step(first + 1)
+    assert probe.odometry_at(probe.stamp(first + 1))
+    _assert_diagnostics_finite(probe.diagnostics)

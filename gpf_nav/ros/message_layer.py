@@ -130,7 +130,8 @@ class MessageLayer:
             reinit_hold=p["reinit_hold"], monitor=monitor_options(p), monitor_hold=p["monitor_hold"],
             consistency=consistency_options(p),
             history_length=p["history_length"], reapply_budget=p["reapply_budget"], gates=gates(p, STREAMS),
-            gate_limit=p["gate_limit"])
+            gate_limit=p["gate_limit"], fault_action=p["integrity_fault_action"],
+            fault_updates=p["integrity_fault_updates"])
         self.engine = EstimatorEngine(factory, self.model, config, monotonic=monotonic)
         self.thresholds = diag.Thresholds(ess_warn=p["ess_warn_threshold"],
                                           costate_warn=p["costate_warn_threshold"],
@@ -238,7 +239,14 @@ class MessageLayer:
         self._measurement(stream.name, stamp, y, now_ns, None if stream.model_measurement else sensor)
 
     def _measurement(self, stream: str, stamp: int, y: np.ndarray, now_ns: int, sensor=None) -> None:
-        ok, reason = self.engine.measurement(stamp, y, now_ns, stream, sensor)
+        engine = self.engine
+        was_initialized, fault_reinits = engine.initialized, engine.fault_reinit_count
+        ok, reason = engine.measurement(stamp, y, now_ns, stream, sensor)
+        if engine.fault_reinit_count > fault_reinits:
+            self.logger.warning(f"{engine.last_reinit_reason} at {stamp * 1e-9:.3f} s "
+                                f"({engine.fault_reinit_count} so far; integrity_fault_action)")
+        elif ok and not reason and not was_initialized:
+            self.logger.info(f"initialised from {engine.init_source} at {engine.t_ns * 1e-9:.3f} s")
         if not ok:
             if reason == "filter_error":
                 self.logger.error(f"filter re-initialised from the last good estimate: "
