@@ -147,9 +147,11 @@ class MessageLayer:
         self.time_jumps = 0                   # backward jumps of the node clock seen
 
     def describe(self) -> str:
-        """One line: filter, N, world frame and where the initial state comes from."""
+        """One line: filter, N (particles or ensemble members, when it has them), world frame and where the
+        initial state comes from."""
         p = self.params
-        return (f"{self.filter_name} estimator up: N={p['n_particles']}, world_frame={p['world_frame']}, "
+        size = f"N={p['n_particles']}, " if CLOUD in self.engine.filter.capabilities else ""
+        return (f"{self.filter_name} estimator up: {size}world_frame={p['world_frame']}, "
                 f"initialisation from " + ("parameters" if p["initial_state"] is not None else
                                            f"set_state, set_pose or the first {p['init_window']} "
                                            "measurements"))
