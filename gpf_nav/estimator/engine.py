@@ -106,7 +106,7 @@ class EngineConfig:
     gates: dict = field(default_factory=dict)  # stream -> chi-square probability of its innovation gate; 0: off
     gate_limit: int = 5                     # after this many gate refusals in a row the next one is used
     fault_action: str = "none"              # one of FAULT_ACTIONS: re-initialise after a persistent FAULT
-    fault_updates: int = 10                 # integrity FAULT updates in a row that make it persistent
+    fault_updates: int = 30                 # integrity FAULT updates in a row that make it persistent
 
 
 @dataclass(frozen=True)

@@ -117,7 +117,7 @@ ESTIMATOR = [
         Spec("monitor_warn_false_alarm_rate", 1e-2, "Per-update probability of WARN or worse on a consistent filter; >= monitor_false_alarm_rate.", bounds="(0, 1)"),
         Spec("monitor_quarantine_rate", -1.0, "p-value below which a window is kept out of the reference; negative: monitor_false_alarm_rate / 100; 0: no quarantine; at most monitor_false_alarm_rate.", bounds="finite"),
         Spec("integrity_fault_action", "measurements", "After integrity_fault_updates co-state monitor FAULT updates in a row: measurements (start again from the next init_window measurements), prior (from the last initial state: parameters, set_state, set_pose or batch fit, predicted to now) or none (report only).", choices=FAULT_ACTIONS),
-        Spec("integrity_fault_updates", 10, "Co-state monitor FAULT updates in a row that make integrity_fault_action act.", bounds=">= 1"),
+        Spec("integrity_fault_updates", 30, "Co-state monitor FAULT updates in a row that make integrity_fault_action act.", bounds=">= 1"),
         Spec("monitor_hold", 5.0, "A monitor WARN or FAULT (co-state or consistency) stays in /diagnostics this long after the update that raised it (steady clock); negative: latched until ~/reset or a re-initialisation.", "s", "finite"),
     ),
     *_group(
