@@ -6,7 +6,7 @@
     ros2 launch gpf_nav gpf_nav.launch.py autostart:=false     # the estimator waits for a lifecycle manager
     ros2 launch gpf_nav gpf_nav.launch.py shutdown_on_simulator_exit:=true   # end with the trajectory
     ros2 launch gpf_nav gpf_nav.launch.py publish_suite:=true  # + altimeter, TRN fixes, velocimeter
-    ros2 topic echo /odometry/filtered
+    ros2 topic echo /odometry/filtered nav_msgs/msg/Odometry
 
 The arguments, their choices and what they set are in ``gpf_nav.ros.launch_arguments`` (tested without
 launch). ``use_sim_time``, ``autostart`` and ``filter`` override the params file only when given. A value
@@ -15,13 +15,14 @@ one message and a non-zero exit, before any node starts. Ctrl-C stops both nodes
 Without launch_ros, ``gpf-nav demo`` runs the same pair in one process (docs/ros.md).
 """
 import os
+import shutil
 import tempfile
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction, RegisterEventHandler, Shutdown
 from launch.conditions import IfCondition
-from launch.event_handlers import OnProcessExit
+from launch.event_handlers import OnProcessExit, OnShutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
@@ -40,10 +41,14 @@ def _nodes(context):
     simulator = Node(executable="simulator", name=args.SIMULATOR_NAME,
                      parameters=[os.path.join(config, "simulator.yaml"), args.simulator_parameters(values)],
                      **common)
-    # params_file, then the given arguments in a file of their own (see gpf_nav.ros.launch_arguments)
-    files = args.estimator_parameter_files(values, tempfile.mkdtemp(prefix="gpf_nav_launch_"))
+    # params_file, then the given arguments in a file of their own (see gpf_nav.ros.launch_arguments),
+    # in a folder removed when the launch ends
+    folder = tempfile.mkdtemp(prefix="gpf_nav_launch_")
+    files = args.estimator_parameter_files(values, folder)
     estimator = Node(executable="estimator", name=args.ESTIMATOR_NAME, parameters=files, **common)
     return [simulator, estimator,
+            RegisterEventHandler(OnShutdown(on_shutdown=[OpaqueFunction(
+                function=lambda _context: shutil.rmtree(folder, ignore_errors=True))])),
             RegisterEventHandler(OnProcessExit(target_action=simulator,
                                                on_exit=[Shutdown(reason="the simulator finished its trajectory")]),
                                  condition=IfCondition(values["shutdown_on_simulator_exit"]))]

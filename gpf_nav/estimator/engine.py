@@ -17,7 +17,10 @@ of ROS time. Rules:
   input, and the later inputs are re-applied; the result equals in-order delivery bit for bit. Older stamps are refused (``older_than_history``), and so are
   stamps within it but before the filter's (re-)initialisation (``stale_stamp``); more than ``max_future`` s ahead of the
   node clock too (``future_stamp``). With ``history_length`` 0 every stamp before the filter's time is
-  ``stale_stamp``.
+  ``stale_stamp``. Re-application is paid from a budget in seconds of stamps
+  (:class:`gpf_nav.estimator.input_checks.ReapplyBudget`: ``reapply_budget`` s per second of the filter's time,
+  at most ``history_length`` s saved up): a late measurement whose lateness exceeds what is left is refused
+  (``reapply_budget``), so a stream of late data cannot take more than that share of the work.
 * An IMU sample delivered after a measurement stamped after it (the topics arrive in any order) that
   should have been that measurement's input re-applies the history from there in the same way
   (``late_imu_count``), so the estimate does not depend on the order of the two topics. The
@@ -40,6 +43,11 @@ of ROS time. Rules:
   (``reinit_count``; diagnostics go to ERROR for ``reinit_hold`` s). A re-initialisation the core
   filter does by itself (its ``recoveries`` counter: all particles non-finite or weightless, ESS
   collapse with ``collapse_steps``) is counted and reported the same way.
+* After ``fault_updates`` updates in a row at which the co-state integrity monitor is at FAULT the filter
+  is re-initialised by ``fault_action``: ``"measurements"`` starts it again from the next ``init_window``
+  measurements (the batch fit, even with an ``initial_state``), ``"prior"`` from the last initial state
+  (parameters, ``set_state``, ``set_pose`` or batch fit) predicted to the filter's time; ``"none"`` leaves it
+  (the FAULT is only reported). Counted in ``fault_reinit_count`` and ``reinit_count``.
 """
 from __future__ import annotations
 
@@ -60,7 +68,7 @@ from gpf_nav.integrity import ConsistencyMonitor, ConsistencyStatus, CostateMoni
 from gpf_nav.estimator.history import Entry, History
 from gpf_nav.estimator.initialization import batch_initial_state
 from gpf_nav.sensors import ModelSensor, innovation_distance
-from gpf_nav.estimator.input_checks import Counters, RateLimiter, check_timing
+from gpf_nav.estimator.input_checks import Counters, RateLimiter, ReapplyBudget, check_timing
 
 NS = 1_000_000_000
 LATE_IMU_MEMORY = 50
@@ -70,6 +78,10 @@ not up to ``SNAPSHOT_EVERY`` of them, for a copy of the filter per input (a sixt
 IMU_SAMPLES = 4096
 """IMU samples kept (the zero-order hold looks them up, also when re-applying the history)."""
 LEVEL_RANK = {"OK": 0, "WARN": 1, "FAULT": 2}
+FAULT_ACTIONS = ("none", "measurements", "prior")
+"""What a persistent integrity FAULT leads to (``EngineConfig.fault_action``)."""
+PRIOR_SOURCES = ("parameters", "set_state", "set_pose", "measurements")
+"""Initialisations kept as the prior a ``fault_action: prior`` starts again from."""
 
 
 @dataclass
@@ -90,8 +102,11 @@ class EngineConfig:
     monitor_hold: float = 5.0               # s (steady clock) a monitor WARN/FAULT stays reported; < 0: until reset
     consistency: dict | None = field(default_factory=dict)  # ConsistencyMonitor keyword arguments; None: disabled
     history_length: float = 10.0            # s, late measurements within this are fused at their stamp; 0: none
+    reapply_budget: float = 0.5             # s of lateness re-applied per s of filter time (ReapplyBudget); 0: unlimited
     gates: dict = field(default_factory=dict)  # stream -> chi-square probability of its innovation gate; 0: off
     gate_limit: int = 5                     # after this many gate refusals in a row the next one is used
+    fault_action: str = "none"              # one of FAULT_ACTIONS: re-initialise after a persistent FAULT
+    fault_updates: int = 30                 # integrity FAULT updates in a row that make it persistent
 
 
 @dataclass(frozen=True)
@@ -188,12 +203,18 @@ class EstimatorEngine:
         self.consistency = ConsistencyMonitor(**config.consistency) if config.consistency is not None else None
         self.consistency_fault_updates = 0    # cumulative
         self.consistency_error = ""
+        self.fault_reinit_count = 0           # re-initialisations after a persistent FAULT (cumulative)
+        self._prior: tuple[np.ndarray, np.ndarray, int] | None = None  # the last initial state (PRIOR_SOURCES)
         self._model_sensor = ModelSensor(model)
         self.reset()
 
     # --- state -----------------------------------------------------------------------------------------
-    def reset(self) -> None:
-        """Back to the start-up state (counters are kept; they are cumulative)."""
+    def reset(self, from_data: bool = False) -> None:
+        """Back to the start-up state (counters are kept; they are cumulative); ``from_data``: initialise
+        from the next measurements (the batch fit) even when an ``initial_state`` is configured."""
+        self._from_data = from_data
+        if not from_data:
+            self._prior = None
         self.filter = self.factory()
         self._core_recoveries = 0
         self.t_ns: int | None = None          # ROS time of the filter state
@@ -205,6 +226,7 @@ class EstimatorEngine:
         self._good: tuple[np.ndarray, np.ndarray, int] | None = None
         self._imu: deque[tuple[int, np.ndarray]] = deque(maxlen=IMU_SAMPLES)
         self.history = History(int(round(self.config.history_length * NS)))
+        self._budget = ReapplyBudget(self.config.reapply_budget, self.config.history_length, 0)
         self._streaks: dict[str, int] = {}   # gate refusals in a row per stream
         self.late_count = 0                   # late measurements fused at their stamp
         self.late_imu_count = 0               # IMU samples that came after a measurement that needed them
@@ -222,9 +244,14 @@ class EstimatorEngine:
         self._reset_monitor()
         self._consistency_alarm: tuple[float, ConsistencyStatus] | None = None
         cfg = self.config
-        if cfg.initial_state is not None and cfg.initial_stamp >= 0.0:
+        if not self._fits_data and cfg.initial_stamp >= 0.0:
             self._initialize(cfg.initial_state, np.diag(cfg.initial_std ** 2),
                              int(round(cfg.initial_stamp * 1e9)), "parameters")
+
+    @property
+    def _fits_data(self) -> bool:
+        """Whether the next initialisation is the batch fit of measurements (rather than ``initial_state``)."""
+        return self.config.initial_state is None or self._from_data
 
     @property
     def initialized(self) -> bool:
@@ -245,8 +272,12 @@ class EstimatorEngine:
         self.t_ns = int(t_ns)
         self._init_ns = int(t_ns)
         self.init_source = source
+        if source in PRIOR_SOURCES:
+            self._prior = (np.array(mean, dtype=float), np.array(cov, dtype=float), int(t_ns))
+        self._from_data = False
         self._init_buffer = []
         self.history.clear()
+        self._budget = ReapplyBudget(self.config.reapply_budget, self.config.history_length, t_ns)
         self._late_imu_ns = None
         self._streaks = {}
         self._reset_monitor()
@@ -281,7 +312,9 @@ class EstimatorEngine:
             ok, reason = self._late_allowed(stamp_ns)
         if ok and not self._rate.allow(self.monotonic()):
             ok, reason = False, "rate_limit"
-        if ok and not self.initialized and sensor is not None and self.config.initial_state is None:
+        if ok and late and not self._budget.spend(self.t_ns, (self.t_ns - stamp_ns) * 1e-9):
+            ok, reason = False, "reapply_budget"
+        if ok and not self.initialized and sensor is not None and self._fits_data:
             ok, reason = False, "not_initialized"  # only the model's own measurements initialise
         if not ok:
             self.counters.reject(stream, reason)
@@ -290,7 +323,7 @@ class EstimatorEngine:
         self.counters.masked += int(np.sum(~np.isfinite(y)))
         self.last_measurement_ns = max(stamp_ns, self.last_measurement_ns or 0)
         if not self.initialized:
-            if self.config.initial_state is not None:
+            if not self._fits_data:
                 self._initialize(self.config.initial_state, np.diag(self.config.initial_std ** 2),
                                  stamp_ns, "parameters")
             else:
@@ -300,7 +333,33 @@ class EstimatorEngine:
             self.counters.reject(stream, reason)
             return False, reason
         self.counters.accept(stream)
+        if self.config.fault_action != "none" and self._fault_streak >= self.config.fault_updates:
+            self._act_on_fault()
         return True, ""
+
+    def _act_on_fault(self) -> None:
+        """Re-initialise after ``fault_updates`` integrity FAULT updates in a row (``fault_action``)."""
+        why = f"integrity FAULT for {self._fault_streak} updates in a row"
+        self.fault_reinit_count += 1
+        self.reinit_count += 1
+        self._last_reinit_time = self.monotonic()
+        self._shadow = None
+        t_ns = self.t_ns
+        if self.config.fault_action == "prior" and self._prior is not None:
+            mean, cov, t0 = self._prior
+            try:
+                self._initialize(mean, cov, t0, "prior")
+                self._predict_to(t_ns)
+                if self._store(t_ns):
+                    self._init_ns = t_ns  # the stamps before it belong to the state given up
+                    self.last_reinit_reason = f"{why}: re-initialised from the last prior"
+                    return
+            except Exception:  # noqa: BLE001 - a prior that cannot be predicted: start from the data
+                pass
+        last = self.last_measurement_ns
+        self.reset(from_data=True)
+        self.last_measurement_ns = last  # the fit takes only measurements after the ones given up
+        self.last_reinit_reason = f"{why}: re-initialising from the next measurements"
 
     def _late_allowed(self, stamp_ns: int) -> tuple[bool, str]:
         """Whether a measurement stamped before the filter's time can be fused at its stamp."""
@@ -618,6 +677,7 @@ class EstimatorEngine:
 
     # --- integrity -------------------------------------------------------------------------------------
     def _reset_monitor(self) -> None:
+        self._fault_streak = 0                # updates in a row at FAULT
         if self.consistency is not None:
             self.consistency.reset()
         if self.monitor is None:
@@ -643,6 +703,7 @@ class EstimatorEngine:
             self.integrity_error = f"{type(err).__name__}: {err}"
             self._reset_monitor()
             return
+        self._fault_streak = self._fault_streak + 1 if status.level == "FAULT" else 0
         if status.level == "FAULT":
             self.integrity_fault_updates += 1
         elif status.level == "WARN":

@@ -20,6 +20,8 @@ the counts in ``/diagnostics`` (see ``docs/ros.md``). The reasons are:
 ``older_than_history``       a measurement stamped more than ``history_length`` s before the filter's time
 ``not_positive_definite``    a message's covariance block is not symmetric positive definite
 ``innovation_gate``          refused by the stream's innovation gate (chi-square, ``<stream>_gate``)
+``reapply_budget``           a late measurement whose lateness exceeds what is left of the re-application
+                             budget (``reapply_budget``, :class:`ReapplyBudget`)
 ``future_stamp``             more than ``max_future`` seconds ahead of the node clock
 ``rate_limit``               above ``max_measurement_rate`` messages per second
 ``not_initialized``          arrived before the filter could be initialised and not usable for it
@@ -39,7 +41,7 @@ REASONS = (
     "bad_stamp", "wrong_frame", "non_finite", "no_measured_component", "non_positive_range",
     "range_out_of_limits", "angle_out_of_range", "non_unit_quaternion", "not_provided", "stale_stamp",
     "future_stamp", "rate_limit", "not_initialized", "no_velocity", "filter_error", "internal_error",
-    "older_than_history", "not_positive_definite", "innovation_gate", "unknown_station",
+    "older_than_history", "not_positive_definite", "innovation_gate", "unknown_station", "reapply_budget",
 )
 
 OK = (True, "")
@@ -158,6 +160,33 @@ class RateLimiter:
             self._count = 0
         self._count += 1
         return self._count <= self.rate
+
+
+class ReapplyBudget:
+    """How much history late measurements may have re-applied, in seconds of stamps per second of the
+    filter's time: a bucket of ``capacity`` s, full at start, refilled at ``rate`` s per second the filter's
+    time advances; a late measurement costs its lateness (filter time minus its stamp). Decisions depend on
+    the stamps only, so the same input sequence gets the same verdicts on any machine. ``rate <= 0``:
+    unlimited."""
+
+    def __init__(self, rate: float, capacity: float, t_ns: int):
+        self.rate = float(rate)
+        self.capacity = float(capacity)
+        self.level = self.capacity
+        self._t_ns = int(t_ns)
+
+    def spend(self, t_ns: int, cost: float) -> bool:
+        """Refill up to the filter time ``t_ns``, then take ``cost`` [s]; False (nothing taken) when less
+        than ``cost`` is left."""
+        if self.rate <= 0.0:
+            return True
+        if t_ns > self._t_ns:
+            self.level = min(self.capacity, self.level + self.rate * (t_ns - self._t_ns) * 1e-9)
+            self._t_ns = int(t_ns)
+        if cost > self.level:
+            return False
+        self.level -= cost
+        return True
 
 
 class Counters:

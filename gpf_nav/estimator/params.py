@@ -15,6 +15,7 @@ import re
 from dataclasses import replace
 
 from gpf_nav import resampling
+from gpf_nav.estimator.engine import FAULT_ACTIONS
 from gpf_nav.estimator.factory import FILTERS
 from gpf_nav.estimator.stations import station_errors
 from gpf_nav.estimator.streams import STREAMS, stream_parameters
@@ -101,6 +102,7 @@ ESTIMATOR = [
         "Timing and input handling",
         Spec("publish_rate", 10.0, "Rate of predicted odometry between measurements (node clock); 0 disables.", "Hz", ">= 0"),
         Spec("max_future", 1.0, "Refuse stamps more than this ahead of the node clock.", "s", "> 0"),
+        Spec("reset_on_time_jump", True, "Reset the filter when the node clock jumps back by more than 1 s (a restarted simulator or bag), checked on every input and every diagnostics_period, whatever publish_rate; false: the jump is only counted and logged."),
         Spec("imu_timeout", 1.0, "An IMU sample older than this (relative to the measurement) is not used.", "s", "> 0"),
         Spec("max_extrapolation", 300.0, "Do not publish predictions more than this past the last measurement.", "s", "> 0"),
         Spec("max_measurement_rate", 1000.0, "Process at most this many measurements per second (steady clock); 0: unlimited.", "Hz", ">= 0"),
@@ -110,6 +112,7 @@ ESTIMATOR = [
     *_group(
         "Measurement streams (gpf_nav.estimator.streams), late measurements",
         Spec("history_length", 10.0, "A measurement stamped up to this long before the filter's time is fused at its stamp (the later inputs are re-applied); older ones are refused; 0: none.", "s", ">= 0"),
+        Spec("reapply_budget", 0.5, "Seconds of lateness that late measurements may have re-applied per second of the filter's time (at most history_length s saved up, full at start): one whose lateness exceeds what is left is refused (reapply_budget); 0: unlimited.", "s/s", ">= 0"),
         *stream_parameters(STREAMS),
         Spec("gate_limit", 5, "After this many refusals of a gate in a row the next measurement of that stream is used.", bounds=">= 0"),
     ),
@@ -132,6 +135,8 @@ ESTIMATOR = [
         Spec("monitor_false_alarm_rate", 1e-3, "Per-update probability of FAULT (diagnostics ERROR) on a consistent filter.", bounds="(0, 1)"),
         Spec("monitor_warn_false_alarm_rate", 1e-2, "Per-update probability of WARN or worse on a consistent filter; >= monitor_false_alarm_rate.", bounds="(0, 1)"),
         Spec("monitor_quarantine_rate", -1.0, "p-value below which a window is kept out of the reference; negative: monitor_false_alarm_rate / 100; 0: no quarantine; at most monitor_false_alarm_rate.", bounds="finite"),
+        Spec("integrity_fault_action", "measurements", "After integrity_fault_updates co-state monitor FAULT updates in a row: measurements (start again from the next init_window measurements), prior (from the last initial state: parameters, set_state, set_pose or batch fit, predicted to now) or none (report only).", choices=FAULT_ACTIONS),
+        Spec("integrity_fault_updates", 30, "Co-state monitor FAULT updates in a row that make integrity_fault_action act.", bounds=">= 1"),
         Spec("monitor_hold", 5.0, "A monitor WARN or FAULT (co-state or consistency) stays in /diagnostics this long after the update that raised it (steady clock); negative: latched until ~/reset or a re-initialisation.", "s", "finite"),
     ),
     *_group(

@@ -131,6 +131,7 @@ def filter_status(engine: EstimatorEngine, now_ns: int | None, thresholds: Thres
         ("last measurement age", _fmt(age) if age is not None else "none yet"),
         ("last IMU sample age", _fmt(imu_age) if imu_age is not None else "none yet"),
         ("reinitializations", str(engine.reinit_count)),
+        ("integrity fault reinitializations", str(engine.fault_reinit_count)),
     ]
     for stream in STREAMS:
         values.append((f"accepted {stream}", str(c.accepted[stream])))

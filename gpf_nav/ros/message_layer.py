@@ -45,6 +45,8 @@ from gpf_nav.sensors.station import StationSensor
 from gpf_nav.sim.scenario import ScenarioConfig, initial_state
 
 LOG_THROTTLE = 5.0  # s (wall clock) between two log lines about the same refusal reason
+TIME_JUMP_NS = 1_000_000_000
+"""A node clock that goes back by more than this (ns) between two calls has jumped (a restarted simulator or bag)."""
 
 CONTROL_TOPICS = {"imu": ("imu", Imu), "set_pose": ("set_pose", PoseWithCovarianceStamped),
                   "set_state": ("set_state", Odometry)}
@@ -132,7 +134,9 @@ class MessageLayer:
             max_measurement_rate=p["max_measurement_rate"], max_extrapolation=p["max_extrapolation"],
             reinit_hold=p["reinit_hold"], monitor=monitor_options(p), monitor_hold=p["monitor_hold"],
             consistency=consistency_options(p),
-            history_length=p["history_length"], gates=gates(p, STREAMS), gate_limit=p["gate_limit"])
+            history_length=p["history_length"], reapply_budget=p["reapply_budget"], gates=gates(p, STREAMS),
+            gate_limit=p["gate_limit"], fault_action=p["integrity_fault_action"],
+            fault_updates=p["integrity_fault_updates"])
         self.engine = EstimatorEngine(factory, self.model, config, monotonic=monotonic)
         self.thresholds = diag.Thresholds(ess_warn=p["ess_warn_threshold"],
                                           costate_warn=p["costate_warn_threshold"],
@@ -146,11 +150,14 @@ class MessageLayer:
         self._integrity_level = "OK"
         self._last_published_ns: int | None = None
         self._last_now_ns = 0
+        self.time_jumps = 0                   # backward jumps of the node clock seen
 
     def describe(self) -> str:
-        """One line: filter, N, world frame and where the initial state comes from."""
+        """One line: filter, N (particles or ensemble members, when it has them), world frame and where the
+        initial state comes from."""
         p = self.params
-        return (f"{self.filter_name} estimator up: N={p['n_particles']}, world_frame={p['world_frame']}, "
+        size = f"N={p['n_particles']}, " if CLOUD in self.engine.filter.capabilities else ""
+        return (f"{self.filter_name} estimator up: {size}world_frame={p['world_frame']}, "
                 f"initialisation from " + ("parameters" if p["initial_state"] is not None else
                                            f"set_state, set_pose or the first {p['init_window']} "
                                            "measurements"))
@@ -177,6 +184,7 @@ class MessageLayer:
         """Process one message of ``stream`` (a name of :attr:`inputs`)
         received at node time ``now_ns``. An unexpected exception is counted (``internal_error``) and
         logged, never raised."""
+        self._watch_clock(now_ns)
         try:
             if stream in self.streams:
                 self._on_measurement(self.streams[stream], msg, now_ns)
@@ -275,7 +283,14 @@ class MessageLayer:
         return False, None
 
     def _measurement(self, stream: str, stamp: int, y: np.ndarray, now_ns: int, sensor=None) -> None:
-        ok, reason = self.engine.measurement(stamp, y, now_ns, stream, sensor)
+        engine = self.engine
+        was_initialized, fault_reinits = engine.initialized, engine.fault_reinit_count
+        ok, reason = engine.measurement(stamp, y, now_ns, stream, sensor)
+        if engine.fault_reinit_count > fault_reinits:
+            self.logger.warning(f"{engine.last_reinit_reason} at {stamp * 1e-9:.3f} s "
+                                f"({engine.fault_reinit_count} so far; integrity_fault_action)")
+        elif ok and not reason and not was_initialized:
+            self.logger.info(f"initialised from {engine.init_source} at {engine.t_ns * 1e-9:.3f} s")
         if not ok:
             if reason == "filter_error":
                 self.logger.error(f"filter re-initialised from the last good estimate: "
@@ -409,12 +424,7 @@ class MessageLayer:
         """The ``publish_rate`` timer: predicted odometry at ``now_ns`` (and a reset if the clock jumped back)."""
         if not now_ns:
             return
-        if now_ns < self._last_now_ns - 1_000_000_000:
-            self.logger.warning(f"node clock jumped back from {self._last_now_ns * 1e-9:.3f} s to "
-                                f"{now_ns * 1e-9:.3f} s: resetting the filter")
-            self.engine.reset()
-            self._last_published_ns = None
-        self._last_now_ns = now_ns
+        self._watch_clock(now_ns)
         if not self.engine.initialized:
             return
         if self._last_published_ns is not None and now_ns <= self._last_published_ns:
@@ -423,10 +433,32 @@ class MessageLayer:
         if est is not None:
             self._publish(now_ns, est[0], est[1], update=False)
 
+    def _watch_clock(self, now_ns: int) -> None:
+        """Reset the filter (``reset_on_time_jump``) when the node clock went back by more than
+        :data:`TIME_JUMP_NS` since the last call; every input and timer tick calls this, so a jump is seen
+        at the first of them after it, whatever ``publish_rate``. Counted in ``time_jumps``."""
+        if not now_ns:  # a simulated clock that has not ticked yet
+            return
+        last, self._last_now_ns = self._last_now_ns, now_ns
+        if now_ns >= last - TIME_JUMP_NS:
+            return
+        self.time_jumps += 1
+        jump = f"node clock jumped back from {last * 1e-9:.3f} s to {now_ns * 1e-9:.3f} s"
+        if not self.params["reset_on_time_jump"]:
+            self.logger.warning(f"{jump} ({self.time_jumps} so far); reset_on_time_jump is false: the filter "
+                                "keeps its state and refuses the stamps before it")
+            return
+        self.engine.reset()
+        self._last_published_ns = None
+        self.logger.warning(f"{jump}: filter reset ({self.time_jumps} so far); it re-initialises from "
+                            + (self.engine.init_source or "set_state, set_pose or the next measurements"))
+
     def diagnostics_tick(self, now_ns: int, uptime: float, hardware_id: str) -> tuple[int, str]:
         """The ``diagnostics_period`` timer: publish ``/diagnostics``; returns ``(level, message)``."""
+        self._watch_clock(now_ns)
         level, message, values = diag.filter_status(self.engine, now_ns, self.thresholds, self.filter_name,
                                                     uptime=uptime)
+        values.append(("node clock jumps back", str(self.time_jumps)))
         self.publish("/diagnostics", diag.to_msg(level, message, values, conv.ns_to_stamp(now_ns),
                                                  hardware_id=hardware_id))
         if not self.engine.initialized and self._throttled("_not_initialized"):

@@ -29,6 +29,23 @@ copy is a ``dt = 0`` update, which the integrity monitor skips). At the end the 
 compared with the ``rejected <reason>`` and ``accepted rae`` counters of the estimator's last
 ``/diagnostics``: every message sent must be accounted for, reason by reason.
 
+Three timing events can be injected, each followed by a quiet span in which the injector passes every
+measurement on unchanged (the estimator re-initialises meanwhile):
+
+* ``--restart-at S``: the simulator is stopped after S simulated s and started again, its clock back at
+  the start (the estimator must reset and re-initialise from the new measurements; the injector starts
+  again after ``--warmup``);
+* ``--late-burst-at S``: ``--late-burst-size`` copies of the measurement three periods (6 s) old, sent
+  back to back: the estimator's re-application budget (``reapply_budget``) takes what it can and refuses
+  the rest as ``reapply_budget``;
+* ``--fault-at S``: a +3 km range bias on ``--fault-steps`` measurements, which drives the co-state
+  monitor to a persistent FAULT and the estimator's ``integrity_fault_action``.
+
+Times are of the (last) simulator's trajectory; space the events at least 150 s apart. For each event the
+summary gives the longest gap between two odometry messages over the quiet span after it (from the
+event, or for the restart from the new simulator's first measurement), in wall and in simulated seconds;
+each must be at most ``--max-gap`` wall s.
+
 Pass/fail (exit code 0/1): the run completed, the estimator process was alive to the end and exited
 cleanly on SIGINT, counters match the prediction exactly, the estimator counted all but at most
 ``--max-imu-loss`` of the simulator's IMU samples (they are not injected into: a node that keeps up loses
@@ -53,10 +70,12 @@ import tempfile
 import time
 from collections import Counter
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
-from gpf_nav.estimator.input_checks import REASONS
+from gpf_nav.estimator.input_checks import REASONS, ReapplyBudget
+from gpf_nav.estimator.params import BY_NAME
 
 NS = 1_000_000_000
 RAW_TOPIC = "soak/raw/rae"
@@ -72,7 +91,10 @@ GARBAGE = (  # kind -> the single reason the estimator must give
 )
 FUTURE_S = 1_000_000   # s ahead of the stamp for future_stamp (far beyond max_future)
 OLD_S = 600            # s behind the stamp for old_stamp
-HISTORY_S = 10.0       # s, the estimator's default history_length (late stamps within it are fused)
+HISTORY_S = BY_NAME["history_length"].default  # s: late stamps within it are fused
+REAPPLY_BUDGET = BY_NAME["reapply_budget"].default  # s of lateness per s of filter time
+BIAS = 3000.0          # m, the range bias of --fault-at
+QUIET_S = 150.0        # simulated s after a late burst or a fault without other tampering
 STREAM_CATEGORIES = ("passed", "dropped", "delayed", "duplicated", "masked")
 
 
@@ -108,6 +130,14 @@ def _parser() -> argparse.ArgumentParser:
                          "(default 0.01: a node that keeps up loses none)")
     ap.add_argument("--keep-log", action="store_true",
                     help="keep the estimator's log file (it is kept anyway when the soak fails)")
+    ap.add_argument("--restart-at", type=float, default=None, help="restart the simulator after S simulated s")
+    ap.add_argument("--late-burst-at", type=float, default=None, help="simulated s of a burst of late measurements")
+    ap.add_argument("--late-burst-size", type=int, default=20, help="messages in the late burst (default 20)")
+    ap.add_argument("--fault-at", type=float, default=None, help="simulated s of a forced integrity fault")
+    ap.add_argument("--fault-steps", type=int, default=20, help="biased measurements of the fault (default 20)")
+    ap.add_argument("--publish-rate", type=float, default=None, help="estimator publish_rate (default its own)")
+    ap.add_argument("--max-gap", type=float, default=3.0,
+                    help="longest odometry gap after an event, wall s (default 3)")
     ap.add_argument("--json", action="store_true", help="print the summary as JSON")
     return ap
 
@@ -157,6 +187,7 @@ class Ledger:
         self.garbage = Counter({k: 0 for k, _ in GARBAGE})         # garbage messages by kind
         self.singles = 0                                           # garbage messages sent alone
         self.bursts = 0                                            # bursts sent
+        self.late_burst = 0                                        # late copies sent (--late-burst-at)
         self.burst_messages = 0
         self.expected_rejected = Counter({r: 0 for r in REASONS})
         self.expected_accepted = 0
@@ -164,18 +195,27 @@ class Ledger:
         self.sent = 0                                              # messages published to the estimator
         self.delayed_outcomes = Counter()                          # verdicts predicted for delayed messages
         self.duplicate_outcomes = Counter()
+        self.restart()
+
+    def restart(self) -> None:
+        """The estimator starts again (a reset): no stamp accepted yet, the budget full."""
         self.newest_ns: int | None = None                          # newest stamp predicted accepted
+        self.budget = ReapplyBudget(REAPPLY_BUDGET, self.history_ns * 1e-9, 0)
 
     def verdict(self, stamp_ns: int, reason: str = "") -> str:
-        """Record one message sent: ``reason`` for garbage, else the timing rule decides."""
+        """Record one message sent: ``reason`` for garbage, else the timing rules (history, budget) decide."""
         self.sent += 1
-        if not reason and self.newest_ns is not None and stamp_ns < self.newest_ns - self.history_ns:
+        newest = self.newest_ns
+        if not reason and newest is not None and stamp_ns < newest - self.history_ns:
             reason = "older_than_history"
+        elif not reason and newest is not None and stamp_ns < newest \
+                and not self.budget.spend(newest, (newest - stamp_ns) * 1e-9):
+            reason = "reapply_budget"
         if reason:
             self.expected_rejected[reason] += 1
             return reason
         self.expected_accepted += 1
-        self.newest_ns = stamp_ns if self.newest_ns is None else max(self.newest_ns, stamp_ns)
+        self.newest_ns = stamp_ns if newest is None else max(newest, stamp_ns)
         return "accepted"
 
 
@@ -194,6 +234,13 @@ class Injector:
         self.ledger = Ledger()
         self.active = False
         self.start_ns: int | None = None
+        self.burst_ns: int | None = None          # stamp from which the late burst goes out (then None)
+        self.fault_ns: int | None = None          # stamp from which the fault's biased measurements go out
+        self.fault_left = args.fault_steps
+        self.quiet_until_ns = 0                   # no tampering before this stamp (after an event)
+        self.events: list[dict] = []              # {"event", "wall", "stamp_ns"}
+        self._recent: list[tuple[int, list]] = []  # the last four measurements from the simulator
+        self._restarted = False                   # the next measurement is the restarted simulator's first
         self._kind = 0
         self._held: list[list] = []   # [countdown, message, stamp_ns]
         qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=1000)
@@ -247,6 +294,27 @@ class Injector:
                 keep.append(item)
         self._held = keep
 
+    def _event(self, name: str, stamp_ns: int) -> None:
+        self.events.append({"event": name, "wall": time.monotonic(), "stamp_ns": stamp_ns})
+        self.quiet_until_ns = max(self.quiet_until_ns, stamp_ns + int(QUIET_S * NS))
+
+    def _late_burst(self, stamp_ns: int) -> None:
+        """``--late-burst-size`` copies of the measurement three periods old, back to back."""
+        self.burst_ns = None
+        self._event("late burst", stamp_ns)
+        old_stamp, values = self._recent[0]
+        for _ in range(self.args.late_burst_size):
+            self.ledger.late_burst += 1
+            self._send(self._msg(old_stamp, values), old_stamp)
+
+    def restart(self, start_ns: int) -> None:
+        """The simulator starts again: the held messages go out now, the estimator is predicted to reset,
+        and tampering starts again at ``start_ns``."""
+        self.flush()
+        self.ledger.restart()
+        self.active, self.start_ns, self.quiet_until_ns, self._recent = False, start_ns, 0, []
+        self._restarted = True
+
     def flush(self) -> None:
         """Send every message still held back (end of the run)."""
         self._held = [[1, m, s] for _, m, s in self._held]
@@ -257,11 +325,25 @@ class Injector:
         stamp = stamp_to_ns(msg.header.stamp)
         values = [msg.vector.x, msg.vector.y, msg.vector.z]
         ledger = self.ledger
+        if self._restarted:
+            self._restarted = False
+            self.events.append({"event": "restart", "wall": time.monotonic(), "stamp_ns": stamp})
+        self._recent = (self._recent + [(stamp, values)])[-4:]
         if not self.active and self.start_ns is not None and stamp >= self.start_ns:
             self.active = True
-        if not self.active:
+        if self.fault_ns is not None and stamp >= self.fault_ns and self.fault_left > 0:
+            if self.fault_left == self.args.fault_steps:
+                self._event("fault", stamp)
+            self.fault_left -= 1
+            ledger.stream["passed"] += 1
+            self._send(self._msg(stamp, [values[0] + BIAS, values[1], values[2]]), stamp)
+            return
+        burst = self.burst_ns is not None and stamp >= self.burst_ns and len(self._recent) == 4
+        if not self.active or stamp < self.quiet_until_ns or burst:
             ledger.stream["passed"] += 1
             self._send(msg, stamp)
+            if burst:
+                self._late_burst(stamp)
             return
         a = self.args
         u = self.rng.random()
@@ -316,8 +398,10 @@ class Listener:
         self.messages = Counter()
         self.last_status = None
         self.last_values: dict[str, str] = {}
-        self.truth: dict[int, np.ndarray] = {}
-        self.estimates: dict[int, np.ndarray] = {}
+        self.epoch = 0                          # simulator runs so far (estimates and truth are kept per run)
+        self.truth: dict[tuple[int, int], np.ndarray] = {}
+        self.estimates: dict[tuple[int, int], np.ndarray] = {}
+        self.odometry_times: list[tuple[float, int]] = []  # (wall s, stamp ns) of every odometry message
         node.create_subscription(Odometry, "odometry/filtered", self._on_odom, 1000)
         node.create_subscription(Odometry, "truth/odometry", self._on_truth, 1000)
         node.create_subscription(Float64, "gpf/ess", lambda m: self._check("gpf/ess", [m.data]), 1000)
@@ -343,12 +427,13 @@ class Listener:
 
     def _on_odom(self, m) -> None:
         from gpf_nav.ros.conversions import odometry_state, stamp_to_ns
+        self.odometry_times.append((time.monotonic(), stamp_to_ns(m.header.stamp)))
         if self._check("odometry/filtered", self._odom_values(m)):
-            self.estimates[stamp_to_ns(m.header.stamp)] = odometry_state(m)
+            self.estimates[(self.epoch, stamp_to_ns(m.header.stamp))] = odometry_state(m)
 
     def _on_truth(self, m) -> None:
         from gpf_nav.ros.conversions import odometry_state, stamp_to_ns
-        self.truth[stamp_to_ns(m.header.stamp)] = odometry_state(m)
+        self.truth[(self.epoch, stamp_to_ns(m.header.stamp))] = odometry_state(m)
 
     def _on_particles(self, m) -> None:
         values = [c for p in m.poses for c in (p.position.x, p.position.y, p.position.z)]
@@ -378,6 +463,16 @@ class Listener:
             return -1
         return int(v["accepted rae"]) + int(v["measurements rejected"])
 
+    def gap_after(self, wall: float, span: float) -> dict:
+        """The longest wait for odometry over ``span`` wall s from ``wall``: in wall s, and in stamps between
+        consecutive odometry messages of that span (s)."""
+        after = [(w, t) for w, t in self.odometry_times if wall < w <= wall + span]
+        walls = [wall] + [w for w, _ in after]
+        stamps = [t for _, t in after]
+        return {"first_odometry_wall_s": round(after[0][0] - wall, 2) if after else None,
+                "max_gap_wall_s": round(max(np.diff(walls)), 2) if after else None,
+                "max_gap_stamp_s": round(max(np.diff(stamps)) * 1e-9, 2) if len(stamps) > 1 else None}
+
     def errors(self) -> np.ndarray:
         common = sorted(set(self.estimates) & set(self.truth))
         if not common:
@@ -398,6 +493,7 @@ def _estimator_command(args) -> list[str]:
     return [sys.executable, "-m", "gpf_nav.ros.estimator_node", "--ros-args",
             "-p", "use_sim_time:=true", "-p", f"filter:={args.filter}", "-p", f"n_particles:={args.particles}",
             "-p", f"queue_depth:={args.queue_depth}", "-p", "diagnostics_period:=1.0",
+            *(["-p", f"publish_rate:={args.publish_rate}"] if args.publish_rate is not None else []),
             "--log-level", "warn"]
 
 
@@ -442,16 +538,24 @@ def run(args) -> dict:
         if not listener.last_values:
             raise RuntimeError("estimator did not come up within 60 s")
 
-        sim = SimulatorNode(context=context, cli_args=["--ros-args", "-r", f"measurements/rae:={RAW_TOPIC}"],
-                            parameter_overrides=[
-                                Parameter("rate_factor", value=float(args.rate_factor)),
-                                Parameter("scenario.duration", value=float(sim_seconds)),
-                                Parameter("scenario.epsilon", value=float(args.epsilon)),
-                                Parameter("seed", value=int(args.seed)), Parameter("start_delay", value=1.5),
-                                Parameter("hand_over_prior", value=False)])  # it learns from the measurements
-        nodes.append(sim)
-        executor.add_node(sim)
-        injector.start_ns = sim.stamp_ns(int(args.warmup * NS))
+        def start_simulator(events: bool = True) -> SimulatorNode:
+            node = SimulatorNode(context=context, cli_args=["--ros-args", "-r", f"measurements/rae:={RAW_TOPIC}"],
+                                 parameter_overrides=[
+                                     Parameter("rate_factor", value=float(args.rate_factor)),
+                                     Parameter("scenario.duration", value=float(sim_seconds)),
+                                     Parameter("scenario.epsilon", value=float(args.epsilon)),
+                                     Parameter("seed", value=int(args.seed)), Parameter("start_delay", value=1.5),
+                                     Parameter("hand_over_prior", value=False)])  # it learns from the measurements
+            nodes.append(node)
+            executor.add_node(node)
+            injector.start_ns = node.stamp_ns(int(args.warmup * NS))
+            for name, at in (("burst_ns", args.late_burst_at), ("fault_ns", args.fault_at)):
+                setattr(injector, name, None if at is None or not events else node.stamp_ns(int(at * NS)))
+            return node
+
+        sim = start_simulator(events=args.restart_at is None)  # with a restart, the events are in the second run
+        retired: Counter = Counter()  # what the simulators before the running one published
+        restart_pending = args.restart_at is not None
         measuring = False
 
         rss_samples: list[tuple[float, float, int]] = []
@@ -467,6 +571,10 @@ def run(args) -> dict:
                 alive = False
                 break
             sim_now = sim.trajectory_ns * 1e-9
+            if restart_pending and sim_now >= args.restart_at:
+                restart_pending = False
+                sim = _restart(sim, retired, injector, listener, executor, nodes, start_simulator)
+                continue
             if injector.active and not measuring:
                 measuring = True
                 rss_start, own_start = rss_kib(proc.pid), rss_kib()
@@ -477,7 +585,8 @@ def run(args) -> dict:
                 next_sample += args.rss_period
         sim_wall = time.monotonic() - run_start
         drain = time.monotonic() + 10.0  # the simulator's last messages reach the injector, then the held ones go
-        while time.monotonic() < drain and sum(injector.ledger.stream.values()) < sim.published["measurement"]:
+        while time.monotonic() < drain and \
+                sum(injector.ledger.stream.values()) < retired["measurement"] + sim.published["measurement"]:
             executor.spin_once(timeout_sec=0.05)
         injector.flush()
 
@@ -496,7 +605,8 @@ def run(args) -> dict:
 
         exit_code = _stop(proc)
         wall = time.monotonic() - wall_start
-        summary = _summarise(args, sim, injector.ledger, listener, alive, exit_code, _tail(log.name, 100_000),
+        ran = SimpleNamespace(finished=sim.finished, published=retired + Counter(sim.published))
+        summary = _summarise(args, ran, injector, injector.ledger, listener, alive, exit_code, _tail(log.name, 100_000),
                              rss_start or {}, rss_end, rss_samples, own_start or {}, own_end,
                              sim_wall, wall)
         summary["estimator_log"] = log.name if (args.keep_log or not summary["passed"]) else None
@@ -511,6 +621,26 @@ def run(args) -> dict:
         log.close()
         if not summary.get("estimator_log"):  # kept when the soak failed or --keep-log
             Path(log.name).unlink(missing_ok=True)
+
+
+def _restart(sim, retired: Counter, injector: Injector, listener: Listener, executor, nodes: list,
+             start_simulator):
+    """Stop ``sim`` once its measurements reached the injector, let the estimator take what was sent, then
+    start a new simulator (its clock back at the start); returns it."""
+    drain = time.monotonic() + 5.0
+    while time.monotonic() < drain and sum(injector.ledger.stream.values()) < retired["measurement"] \
+            + sim.published["measurement"]:
+        executor.spin_once(timeout_sec=0.05)
+    retired.update(sim.published)
+    executor.remove_node(sim)
+    nodes.remove(sim)
+    sim.destroy_node()
+    injector.restart(0)
+    drain = time.monotonic() + 1.0
+    while time.monotonic() < drain:
+        executor.spin_once(timeout_sec=0.05)
+    listener.epoch += 1
+    return start_simulator()
 
 
 def _stop(proc) -> int:
@@ -533,7 +663,7 @@ def _tail(path: str, lines: int = 20) -> str:
         return ""
 
 
-def _summarise(args, sim, ledger: Ledger, listener: Listener, alive: bool, exit_code: int, log_text: str,
+def _summarise(args, sim, injector: Injector, ledger: Ledger, listener: Listener, alive: bool, exit_code: int, log_text: str,
                rss_start, rss_end, rss_samples, own_start, own_end, sim_wall: float,
                wall: float) -> dict:
     v = listener.last_values
@@ -553,6 +683,10 @@ def _summarise(args, sim, ledger: Ledger, listener: Listener, alive: bool, exit_
     imu_published, imu_accepted = sim.published["imu"], int(v.get("accepted imu", -1))
     imu_loss = 1.0 - imu_accepted / imu_published if imu_published else 0.0
     non_finite = sum(listener.non_finite.values())
+    events = [{"event": e["event"], "stamp_s": round(e["stamp_ns"] * 1e-9, 3), **listener.gap_after(e["wall"], QUIET_S / args.rate_factor)}
+              for e in injector.events]
+    wanted = [name for name, at in (("restart", args.restart_at), ("late burst", args.late_burst_at),
+                                    ("fault", args.fault_at)) if at is not None]
     log_problems = [line for line in log_text.splitlines() if "Traceback" in line or "internal_error" in line
                     or "[ERROR]" in line or "[FATAL]" in line]
     checks = {
@@ -566,6 +700,10 @@ def _summarise(args, sim, ledger: Ledger, listener: Listener, alive: bool, exit_
         "no ERROR, FATAL or traceback in the estimator log": not log_problems,
         f"estimate follows truth (second-half median error <= {args.max_error:g} m)": late_median <= args.max_error,
     }
+    if wanted:
+        checks[f"events injected ({', '.join(wanted)}), odometry back within {args.max_gap:g} wall s of each"] = (
+            sorted(e["event"] for e in events) == sorted(wanted)
+            and all(e["max_gap_wall_s"] is not None and e["max_gap_wall_s"] <= args.max_gap for e in events))
     growth = None
     if rss_start.get("VmRSS") and rss_end.get("VmRSS"):
         growth = rss_end["VmRSS"] - rss_start["VmRSS"]
@@ -591,6 +729,8 @@ def _summarise(args, sim, ledger: Ledger, listener: Listener, alive: bool, exit_
         "garbage_single": ledger.singles,
         "bursts": ledger.bursts,
         "burst_messages": ledger.burst_messages,
+        "late_burst_messages": ledger.late_burst,
+        "events": events,
         "delayed_verdicts": dict(ledger.delayed_outcomes),
         "duplicate_verdicts": dict(ledger.duplicate_outcomes),
         "sent_to_estimator": ledger.sent,
@@ -619,7 +759,8 @@ def _summarise(args, sim, ledger: Ledger, listener: Listener, alive: bool, exit_
         "final_diagnostics": {k: v.get(k) for k in (
             "initialized from", "reinitializations", "ESS", "integrity level", "integrity samples",
             "integrity components", "integrity fault updates", "integrity warn updates", "integrity skipped updates",
-            "integrity resets", "accepted imu", "messages rejected")},
+            "integrity resets", "integrity fault reinitializations", "node clock jumps back", "accepted imu",
+            "messages rejected")},
         "position_error_m": {"median": _round(float(np.median(errors))) if errors.size else None,
                              "p95": _round(float(np.percentile(errors, 95))) if errors.size else None,
                              "final": _round(float(errors[-1])) if errors.size else None,
@@ -672,6 +813,11 @@ def format_summary(s: dict) -> str:
     reason_of = dict(GARBAGE)
     for kind, n in s["garbage"].items():
         L.append(f"    {kind:32} {n:>7}   -> {reason_of[kind]}")
+    if s["late_burst_messages"]:
+        L.append(f"  {'late burst (6 s late copies)':34} {s['late_burst_messages']:>7}")
+    for e in s["events"]:
+        L.append(f"  event {e['event']:12} at {e['stamp_s']:.1f} s: first odometry after {e['first_odometry_wall_s']} "
+                 f"wall s, longest gap {e['max_gap_wall_s']} wall s ({e['max_gap_stamp_s']} s of stamps)")
     L.append(f"  {'sent to the estimator':34} {s['sent_to_estimator']:>7}   counted by it: {s['seen_by_estimator']}")
     L.append(f"  {'imu (simulator -> estimator)':34} {s['imu_published']:>7}   accepted: {s['imu_accepted']}")
     L.append("")
