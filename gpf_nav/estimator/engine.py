@@ -264,9 +264,7 @@ class EstimatorEngine:
 
     def _initialize(self, mean, cov, t_ns: int, source: str) -> None:
         fresh = self.factory()
-        # the filter's time is the stamps' (s), the scale of moon_epoch: a station on the
-        # rotating Moon and a tesseral field turn with it
-        fresh.initialize(mean, cov, t_ns * 1e-9)  # may raise: then nothing has changed
+        fresh.initialize(mean, cov)  # may raise: then nothing has changed
         self.filter = fresh
         self._core_recoveries = self.filter.recoveries
         self.t_ns = int(t_ns)
