@@ -64,7 +64,6 @@ def _scenario():
     return generate(ScenarioConfig(duration=200.0, epsilon=0.0), 4)
 
 
-@pytest.mark.xfail(strict=True, reason="the engine starts the filter clock at 0, not at the stamps, so a station on the turning Moon is turned wrong; putting the filter on the stamps broke late-fix fusion in test_ros_sensors (open, stop 36)")
 def test_two_surface_beacons_are_fused_and_an_unknown_one_refused_once():
     scenario = _scenario()
     core, out, log = _core(scenario)

@@ -89,7 +89,6 @@ def _chain_position(est, stamp_ns: int, r: np.ndarray) -> np.ndarray:
     return r
 
 
-@pytest.mark.xfail(strict=True, reason="the engine starts the filter clock at 0, not at the stamps, so a station on the turning Moon is turned wrong; putting the filter on the stamps broke late-fix fusion in test_ros_sensors (open, stop 36)")
 def test_two_surface_beacons_simulated_and_tracked_in_the_site_frame(ros):
     odom = ros.record(Odometry, "odometry/filtered")
     truth = ros.record(Odometry, "truth/odometry")

@@ -264,7 +264,9 @@ class EstimatorEngine:
 
     def _initialize(self, mean, cov, t_ns: int, source: str) -> None:
         fresh = self.factory()
-        fresh.initialize(mean, cov)  # may raise: then nothing has changed
+        # the filter's time is the stamps' (s), the scale of moon_epoch: a station on the rotating
+        # Moon and a field with tesseral terms turn with it
+        fresh.initialize(mean, cov, t_ns * 1e-9)  # may raise: then nothing has changed
         self.filter = fresh
         self._core_recoveries = self.filter.recoveries
         self.t_ns = int(t_ns)
