@@ -5,7 +5,8 @@ The station at the Moon's centre is replaced by beacons on the surface (``Scenar
 with the Moon (IAU rate, the Moon-fixed x axis the inertial one at the run's start), and sees the
 vehicle only above its horizon; between passes the filters predict. The beacons stand on the ground
 track of the default descent (from 0 deg, 0 deg at apolune north-east to 24.4 deg N, 128.0 deg E below
-the vehicle at 2400 s, 33 km up: the landing site). What each sees of the noise-free default descent:
+the vehicle at 2400 s, 33 km up: the landing site). What each sees of run 0 (seed 0) of the default
+descent (the truth's process noise moves these by a few seconds between runs):
 
 * ``surface-gaps``, one beacon mid-track (26 N, 57 E): 850-1500 s, 27 % of the steps; the filters
   predict from the prior for 850 s, then for 900 s after the pass.

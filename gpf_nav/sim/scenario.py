@@ -85,6 +85,8 @@ class ScenarioConfig:
         surface_stations: beacons on the rotating Moon that replace the station at ``station``: latitude
             (rad), longitude (rad, east positive) and height (m above the mean radius) of each in turn, 3
             numbers per beacon (:mod:`gpf_nav.sim.surface_stations`; empty: the paper's one station).
+            They measure all three channels with the scenario's noise (times ``measurement_noise_scale``);
+            ``case``, dropouts, outliers and bias act on the centre station's ``measurements`` only.
     """
 
     epsilon: float = 0.09
