@@ -60,8 +60,8 @@ def test_run_filter_counts_the_published_covariances_a_consumer_cannot_factor():
     class SingularAfterThree(ExtendedKF):
         updates = 0
 
-        def update(self, y):
-            super().update(y)
+        def update(self, y, sensor=None):
+            super().update(y, sensor)
             self.updates += 1
 
         @property

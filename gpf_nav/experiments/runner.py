@@ -25,7 +25,9 @@ from gpf_nav.experiments import metrics
 from gpf_nav.filters.interface import RESAMPLING
 from gpf_nav.integrity import ConsistencyMonitor, innovation_moments
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate, undetermined_subspace
+from gpf_nav.sim.surface_stations import scenario_stations
 from gpf_nav.sensors.model import ModelSensor
+from gpf_nav.sensors.sensor import Sensor
 
 DEFAULT_PARTICLES = 500
 DEFAULT_DIVERGENCE_BOUND = 1.0e6  # m: a run whose position error ever exceeds 1000 km has diverged
@@ -133,8 +135,13 @@ class RunTask:
     tag: dict = field(default_factory=dict, compare=False, hash=False)
 
 
-def run_filter(flt, scenario, divergence_bound: float = DEFAULT_DIVERGENCE_BOUND) -> dict:
+def run_filter(flt, scenario, divergence_bound: float = DEFAULT_DIVERGENCE_BOUND,
+               stations: list[tuple[Sensor, np.ndarray]] | None = None) -> dict:
     """Run one initialised-from-prior filter over a scenario and summarise it.
+
+    The filter fuses the scenario's own measurements, or, when ``stations`` is given, each of its
+    ``(sensor, measurements (K, m))`` in turn at every step instead (the surface stations of
+    :func:`gpf_nav.sim.surface_stations.scenario_stations`).
 
     Returns a dict with per-run scalars (``position_rmse`` m, ``velocity_rmse`` m/s, ``ess`` time average
     of ESS/N, ``costate_norm`` time average, ``nees`` time average over the steps with a positive
@@ -160,7 +167,9 @@ def run_filter(flt, scenario, divergence_bound: float = DEFAULT_DIVERGENCE_BOUND
     named = np.full(steps, np.nan)
     fault = np.zeros(steps, dtype=bool)
     monitor = ConsistencyMonitor()
-    sensor = ModelSensor(filter_model(scenario.config))
+    # (the sensor the monitor predicts with, the one the filter is given: None for its model's own, data)
+    own = ModelSensor(filter_model(scenario.config))
+    streams = [(own, None, scenario.measurements)] if stations is None else [(s, s, y) for s, y in stations]
     is_particle = RESAMPLING in flt.capabilities
     error = None
     start = time.perf_counter()
@@ -168,10 +177,11 @@ def run_filter(flt, scenario, divergence_bound: float = DEFAULT_DIVERGENCE_BOUND
         flt.initialize(scenario.prior_mean, scenario.prior_cov)
         for k in range(steps):
             flt.predict(dt, scenario.specific_force[k])
-            if np.isfinite(scenario.measurements[k]).any():
-                r, S = innovation_moments(sensor, scenario.measurements[k], flt.mean, flt.covariance, flt.time)
-                fault[k] = monitor.update(r, S).level == "FAULT"
-            flt.update(scenario.measurements[k])
+            for monitored, sensor, y in streams:
+                if np.isfinite(y[k]).any():
+                    r, S = innovation_moments(monitored, y[k], flt.mean, flt.covariance, flt.time)
+                    fault[k] |= monitor.update(r, S).level == "FAULT"
+                flt.update(y[k], sensor)
             report = flt.observability
             if report is not None:
                 undetermined[k] = report.undetermined
@@ -255,11 +265,12 @@ def run_task(task: RunTask) -> dict:
     """
     scenario_seed, filter_seed = run_seeds(task.seed, task.run)
     scenario = generate(task.config, scenario_seed)
+    stations = scenario_stations(scenario, scenario_seed) if task.config.surface_stations else None
     out = {"index": task.index, "run": task.run, "case": task.config.case, "tag": dict(task.tag),
            "filters": {}}
     for name in expand_filters(task.filters):
         flt = make_filter(name, filter_model_of(name, task.config), task.n_particles, filter_seed)
-        summary = run_filter(flt, scenario, task.divergence_bound)
+        summary = run_filter(flt, scenario, task.divergence_bound, stations)
         if not task.series:
             del summary["series"]
         out["filters"][name] = summary

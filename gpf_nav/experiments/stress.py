@@ -11,6 +11,9 @@ Conditions (each a change of the scenario, ``docs/scenario.md``; the truth flies
   ``large-prior-partial``, ``large-prior-mismatch`` (the large prior with range only, without azimuth,
   or with the 9 % gravity mismatch), ``range-only-mismatch`` (range only, 9 % mismatch), ``dropouts``
   (30 % of the measurement vectors lost) and ``noisy-outliers`` (noise x10 and 3 % outliers);
+* surface stations, only when named (:data:`gpf_nav.experiments.surface.SURFACE`): ``surface-gaps`` (one
+  beacon on the rotating Moon, seen 27 % of the run) and ``surface-two`` (two beacons) replace the station
+  at the centre;
 * ``prior-x<s>``: the prior-size sweep, position sigma ``s`` km and velocity sigma ``s`` m/s for each
   ``s`` of ``--prior-scales`` (default 1, 3, 10; ``large-prior`` is the point ``s = 20``).
 
@@ -45,6 +48,7 @@ from gpf_nav.arguments import CommandParser, positive_float, positive_int
 from gpf_nav.experiments.montecarlo import base_config, git_commit, parse_filters, run_metadata, write_json
 from gpf_nav.experiments.parallel import map_tasks
 from gpf_nav.experiments.runner import DEFAULT_PARTICLES, RunTask, run_task, select_oracle
+from gpf_nav.experiments.surface import SURFACE
 from gpf_nav.sim.scenario import ScenarioConfig
 
 SCHEMA = "gpf_nav.stress/1"
@@ -85,7 +89,7 @@ GRAVITY = {
 }
 """The Moon's own gravity field and slowly varying forces, small against the 9 % mismatch (``J2`` adds
 about 4.6e-4 m/s^2 at 100 km; :mod:`gpf_nav.models.gravity`), run only when named."""
-KNOWN = {**CONDITIONS, **BEYOND, **GRAVITY}
+KNOWN = {**CONDITIONS, **BEYOND, **GRAVITY, **SURFACE}
 
 
 def prior_condition(scale: float) -> tuple[str, tuple[str, dict]]:

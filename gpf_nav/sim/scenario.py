@@ -82,6 +82,11 @@ class ScenarioConfig:
         thrust_drift_rate: with a ``thrust``, the rate, rad/s, at which its direction turns in the orbit
             plane from retrograde towards the radial: ``-cos(w t) v/|v| + sin(w t) n``, ``n`` the unit
             component of ``r`` normal to ``v`` (0: retrograde throughout).
+        surface_stations: beacons on the rotating Moon that replace the station at ``station``: latitude
+            (rad), longitude (rad, east positive) and height (m above the mean radius) of each in turn, 3
+            numbers per beacon (:mod:`gpf_nav.sim.surface_stations`; empty: the paper's one station).
+            They measure all three channels with the scenario's noise (times ``measurement_noise_scale``);
+            ``case``, dropouts, outliers and bias act on the centre station's ``measurements`` only.
     """
 
     epsilon: float = 0.09
@@ -111,6 +116,7 @@ class ScenarioConfig:
     truth_gravity: str = "point"
     filter_gravity: str = "point"
     thrust_drift_rate: float = 0.0
+    surface_stations: tuple[float, ...] = ()
 
     def __post_init__(self):
         if self.case not in CASES:
@@ -144,6 +150,11 @@ class ScenarioConfig:
             value = getattr(self, name)
             if len(value) != 3 or not all(math.isfinite(a) for a in value):
                 raise ValueError(f"{name} must have three finite components")
+        beacons = self.surface_stations
+        if len(beacons) % 3 or not all(math.isfinite(a) for a in beacons) \
+                or not all(abs(lat) <= math.pi / 2 for lat in beacons[::3]):
+            raise ValueError("surface_stations must be finite latitude (in [-pi/2, pi/2] rad), longitude, "
+                             "height triples")
 
     @property
     def steps(self) -> int:
@@ -153,7 +164,7 @@ class ScenarioConfig:
     def to_dict(self) -> dict:
         """Plain dict of the fields (the tuples as lists)."""
         out = dataclasses.asdict(self)
-        for name in ("station", "disturbance", "measurement_bias_sigma"):
+        for name in ("station", "disturbance", "measurement_bias_sigma", "surface_stations"):
             out[name] = list(getattr(self, name))
         return out
 
@@ -282,8 +293,9 @@ def undetermined_subspace(config: ScenarioConfig, state: np.ndarray) -> np.ndarr
     """The directions ``(6, d)`` of the state ``(6,)`` that the scenario's measurements cannot determine
     from the Moon's centre (columns, state units): any rotation of the whole trajectory about the centre
     for range only (``d = 3``), the rotation about the polar axis without azimuth (``d = 1``), none for
-    the full case (``(6, 0)``). None when the station is not at the centre (no such symmetry)."""
-    if any(config.station):
+    the full case (``(6, 0)``). None when the station is not at the centre or surface stations replace
+    it (no such symmetry)."""
+    if any(config.station) or config.surface_stations:
         return None
     axes = {"range": np.eye(3), "partial": np.eye(3)[:, 2:], "full": np.zeros((3, 0))}[config.case]
     p, v = np.asarray(state[:3], dtype=float), np.asarray(state[3:6], dtype=float)
