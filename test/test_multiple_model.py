@@ -132,3 +132,34 @@ def test_only_the_nominal_member_is_mixed():
     nominal_alone.predict(1.0)
     assert np.array_equal(f.compensated.particles, alone.particles)
     assert not np.allclose(f.nominal.mean, nominal_alone.mean)
+
+
+def test_a_member_the_widest_one_does_not_admit_loses_its_probability():
+    """The widest member's model contains every other's, so its posterior covers what they may be: a
+    narrower member whose estimate lies outside its chi-square gate is wrong whatever its evidence (as a
+    small member that explains an unobservable error locally). Pushed 10 widest standard deviations
+    away, the narrow member keeps a good part of its probability without the gate and none with it."""
+    ys = simulate(constant_velocity(), MEAN, 40, 1.0, seed=16)
+
+    def pushed(gate):
+        f = MultipleModelGPF(constant_velocity(), 500, seed=1, unmodelled_acceleration_std=SIGMA,
+                             unmodelled_acceleration_time=TAU, compensation_scales=(0.01, 1.0),
+                             compensation_times=(1.0, 1.0), nesting_gate=gate)
+        f.initialize(MEAN, COV)
+        for y in ys[:-1]:
+            f.predict(1.0)
+            f.update(y)
+        narrow = f.scaled[0]
+        sd = np.sqrt(np.diag(f.compensated.covariance))
+        shift = np.append(10.0 * sd, 0.0)
+        narrow.set_moments(narrow.augmented_mean + shift, narrow.augmented_covariance)
+        before = f.model_probabilities[1]
+        f.predict(1.0)
+        f.update(ys[-1] + 10.0 * sd[0])  # data that agree with the pushed member's position
+        return before, f.model_probabilities[1]
+
+    before, kept = pushed(0.0)
+    assert before > 0.3 and kept > 0.2
+    assert pushed(0.999)[1] == 0.0
+    with pytest.raises(ValueError, match="nesting_gate"):
+        MultipleModelGPF(constant_velocity(), nesting_gate=1.0)

@@ -46,6 +46,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.stats import chi2
 
 from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME
 from gpf_nav.filters.gpf import GeometricProjectionPF
@@ -62,6 +63,9 @@ COMPENSATION_SCALES = (1.0,)
 ``unmodelled_acceleration_std`` (module docstring)."""
 COMPENSATION_TIMES = (1.0,)
 """Default correlation times of the compensated members as fractions of ``unmodelled_acceleration_time``."""
+NESTING_GATE = 0.999
+"""Probability of the chi-square gate by which the widest member's posterior must admit a narrower
+member's estimate for that member to keep its probability (0: no gate)."""
 LADDER = ((0.01, 0.1, 1.0), (0.02, 0.002, 1.0))
 """``(compensation_scales, compensation_times)`` of three members, 1e-3, 1e-2 and 0.1 m/s^2 with 2e4, 2e3
 and 1e6 s (with the default std and time): honest under the Moon's J2 and a drifting thrust, and not
@@ -101,7 +105,8 @@ class MultipleModelGPF(Filter):
     def __init__(self, model: StateSpaceModel, n_particles: int = 500, switch_time: float = SWITCH_TIME,
                  seed: int | np.random.Generator | None = None,
                  compensation_scales: tuple[float, ...] = COMPENSATION_SCALES,
-                 compensation_times: tuple[float, ...] = COMPENSATION_TIMES, **options):
+                 compensation_times: tuple[float, ...] = COMPENSATION_TIMES,
+                 nesting_gate: float = NESTING_GATE, **options):
         if not (math.isfinite(switch_time) and switch_time > 0):
             raise ValueError(f"switch_time must be positive, got {switch_time}")
         scales = tuple(float(s) for s in compensation_scales)
@@ -128,6 +133,10 @@ class MultipleModelGPF(Filter):
                                   **options)
             for stream, scale, time in zip(stream_of, scales, times))
         self.compensated = self.scaled[-1]
+        if not 0.0 <= nesting_gate < 1.0:
+            raise ValueError(f"nesting_gate must lie in [0, 1), got {nesting_gate}")
+        self.nesting_gate = float(nesting_gate)
+        self._nesting_limit = float(chi2.ppf(nesting_gate, model.state_dim)) if nesting_gate else math.inf
         self.compensation_scales, self.compensation_times = scales, times
         self.model = model
         self.switch_time = float(switch_time)
@@ -177,9 +186,23 @@ class MultipleModelGPF(Filter):
             posterior = mu * np.exp(evidence - evidence.max())
             if np.isfinite(posterior).all() and posterior.sum() > 0.0:  # else the data cannot tell them apart
                 mu = posterior
+        if self.nesting_gate > 0.0:
+            admitted = np.where(self._nested(), mu, 0.0)
+            mu = admitted if admitted.sum() > 0.0 else np.eye(mu.size)[-1]
         self.model_probabilities = mu / mu.sum()
         self._predicted_probabilities = self.model_probabilities
         self._mix_due = True
+
+    def _nested(self) -> np.ndarray:
+        """``(K,)`` bool: the members whose estimate of the user's state the widest member's posterior
+        admits (step 4 of the module docstring); the nominal and the widest always."""
+        n = self.model.state_dim
+        mean, cov = self.compensated.mean, self.compensated.covariance
+        admitted = np.ones(len(self.members), dtype=bool)
+        for j, member in enumerate(self.scaled[:-1], start=1):
+            d = member.mean[:n] - mean
+            admitted[j] = float(d @ np.linalg.solve(cov, d)) <= self._nesting_limit
+        return admitted
 
     def _mix(self, p: float) -> None:
         """IMM mixing with switching probability ``p`` (module docstring, step 1)."""
