@@ -21,7 +21,7 @@ from gpf_nav.filters import (BootstrapPF, CompensatedEKF, EnsembleKF, ExtendedKF
 from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD
 from gpf_nav.filters.gating import OUTLIER_GATE, OUTLIER_GATE_LIMIT
 from gpf_nav.filters.gpf import OBSERVABILITY_CONSTRAINT
-from gpf_nav.filters.multiple_model import COMPENSATION_SCALES, COMPENSATION_TIMES, SWITCH_TIME
+from gpf_nav.filters.multiple_model import COMPENSATION_SCALES, COMPENSATION_TIMES, LADDER, NESTING_GATE, SWITCH_TIME
 from gpf_nav.models.state_space import StateSpaceModel
 
 KINDS = ("gpf", "particle", "ensemble", "kalman")
@@ -47,6 +47,10 @@ NAVIGATION_GPF = MappingProxyType({"linearization": "flattened", "flattening_hor
 """Options of the navigation GPF (``gpf``, the node's default) on top of :class:`GeometricProjectionPF`'s
 defaults: the update in the coordinates where the measurement, now and along the flow, is linear
 (:mod:`gpf_nav.filters.flattening`)."""
+
+
+MEMBER_OPTIONS = frozenset({"switch_time", "compensation_scales", "compensation_times", "nesting_gate"})
+"""Options of the multiple-model GPF's members (:class:`MultipleModelGPF`)."""
 
 
 @dataclass(frozen=True)
@@ -93,14 +97,14 @@ class FilterEntry:
 
 
 def _gpf(model, n_particles, seed, switch_time=SWITCH_TIME, compensation_scales=COMPENSATION_SCALES,
-         compensation_times=COMPENSATION_TIMES, **options):
+         compensation_times=COMPENSATION_TIMES, nesting_gate=NESTING_GATE, **options):
     """The multiple model of the nominal and the compensated GPFs, or the nominal GPF alone when the
     compensation is switched off (``unmodelled_acceleration_std`` 0)."""
     if options.get("unmodelled_acceleration_std", UNMODELLED_ACCELERATION_STD) == 0.0:
         return GeometricProjectionPF(model, n_particles, seed=seed, **options)
     return MultipleModelGPF(model, n_particles, switch_time=switch_time, seed=seed,
                             compensation_scales=compensation_scales, compensation_times=compensation_times,
-                            **options)
+                            nesting_gate=nesting_gate, **options)
 
 
 def _gpf_variant(**fixed) -> Callable[..., Filter]:
@@ -151,10 +155,17 @@ for _entry in (
     FilterEntry("gpf", "GPF navigation (default)",
                 lambda model, n_particles, seed, **options: _gpf(
                     model, n_particles, seed, **{**NAVIGATION_GPF, **options}),
-                "gpf", GPF_OPTIONS | {"switch_time", "compensation_scales", "compensation_times"}, "navigation", node=True, aliases=("gpf-mm",),
+                "gpf", GPF_OPTIONS | MEMBER_OPTIONS, "navigation", node=True, aliases=("gpf-mm",),
                 description="the multiple-model GPF: navigation-grade GPFs (cloud metric, exact weights, "
                             "tempering, the update flattened along the flow) on the nominal model and on "
                             "the compensated model at each compensation scale; the node's default"),
+    FilterEntry("gpf-ladder", "GPF navigation, compensation ladder",
+                lambda model, n_particles, seed, **options: _gpf(
+                    model, n_particles, seed, **{**NAVIGATION_GPF, **options, **LADDER}),
+                "gpf", GPF_OPTIONS | {"switch_time"}, node=True,
+                description="gpf with three compensated members (multiple_model.LADDER: 1e-3, 1e-2 and "
+                            "0.1 m/s^2 at 2e4, 2e3 and 1e6 s) and the nesting gate: sized for forces from "
+                            "1e-4 to 0.2 m/s^2 (the Moon's J2, a drifting thrust, the paper's mismatch)"),
     FilterEntry("ekf-comp", "EKF + compensation", _ekf_compensated(), "kalman", table="navigation",
                 description="EKF with the same unmodelled-acceleration compensation and tuning as gpf"),
     FilterEntry("ekf-oracle", "EKF, oracle-tuned Q", _ekf, "kalman", table="navigation", tunes="ekf",
@@ -185,7 +196,7 @@ for _entry in (
                 description="one navigation-grade GPF on the compensated model, averaged with the nominal "
                             "hypothesis by Savage-Dickey (the default before the multiple model)"),
     FilterEntry("gpf-mean", "GPF navigation, mean-linearised update", _gpf, "gpf",
-                GPF_OPTIONS | {"switch_time", "compensation_scales", "compensation_times"},
+                GPF_OPTIONS | MEMBER_OPTIONS,
                 description="gpf with the measurement linearised once at each member's mean (linearization "
                             "mean: the default before issue 23; it narrows what the data cannot see)"),
     FilterEntry("gpf-qmetric", "GPF Q-metric (innovation, corrected, eps=1)",
