@@ -195,9 +195,9 @@ class _Feed:
         self.est = ros.add(EstimatorNode(context=ros.context, parameter_overrides=[
             Parameter(k, value=v) for k, v in overrides.items()]))
         self.pub = ros.node.create_publisher(Vector3Stamped, "measurements/rae", 100)
-        self.clock = ros.node.create_publisher(ClockMsg, "/clock", 10)
+        self.clock_pub = ros.node.create_publisher(ClockMsg, "/clock", 10)
         assert ros.spin_until(lambda: self.pub.get_subscription_count() > 0 and self.diagnostics
-                              and self.clock.get_subscription_count() > 0, 30.0)
+                              and self.clock_pub.get_subscription_count() > 0, 30.0)
 
     def stamp(self, k):
         return self.base + int(round(self.scenario.times[k] * S))
@@ -207,7 +207,7 @@ class _Feed:
         y[0] += bias
         stamp = self.stamp(k)
         for _ in range(100):
-            self.clock.publish(ClockMsg(clock=conv.ns_to_stamp(stamp)))
+            self.clock_pub.publish(ClockMsg(clock=conv.ns_to_stamp(stamp)))
             if self.ros.spin_until(lambda: self.est.get_clock().now().nanoseconds >= stamp, 1.0):
                 break
         else:

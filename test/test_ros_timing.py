@@ -11,51 +11,25 @@
 A probe drives ``/clock`` and sends one measurement at a time, waiting until the estimator has counted
 it, so nothing depends on how fast this machine is.
 """
-import numpy as np
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
 
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from geometry_msgs.msg import Vector3Stamped  # noqa: E402
-from nav_msgs.msg import Odometry  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
 from rosgraph_msgs.msg import Clock as ClockMsg  # noqa: E402
 
 from gpf_nav.ros import conversions as conv  # noqa: E402
 from gpf_nav.ros import diagnostics as diag  # noqa: E402
-from gpf_nav.ros.estimator_node import EstimatorNode  # noqa: E402
 from gpf_nav.sim.scenario import ScenarioConfig, generate  # noqa: E402
+from test_ros_integrity import _Feed  # noqa: E402
 from test_ros_nodes import _assert_diagnostics_finite, _rae, ros  # noqa: E402,F401
 
 S = 1_000_000_000
 SCENARIO = ScenarioConfig(duration=400.0, epsilon=0.0)
 
 
-class _Probe:
+class _Probe(_Feed):
     """An estimator on simulated time, initialised from parameters at ``base``, and a probe that sets
     ``/clock`` and sends measurements one at a time."""
-
-    base = 1000 * S
-
-    def __init__(self, ros, scenario, **params):
-        self.ros, self.scenario = ros, scenario
-        self.odom = ros.record(Odometry, "odometry/filtered")
-        self.diagnostics = ros.record(DiagnosticArray, "/diagnostics")
-        prior_std = np.sqrt(np.diag(scenario.prior_cov))
-        overrides = dict(n_particles=200, publish_rate=0.0, diagnostics_period=0.25, max_published_particles=0,
-                         initial_state=[float(v) for v in scenario.prior_mean], use_sim_time=True,
-                         initial_std=[float(v) for v in prior_std], initial_stamp=self.base * 1e-9)
-        overrides.update(params)
-        self.est = ros.add(EstimatorNode(context=ros.context, parameter_overrides=[
-            Parameter(k, value=v) for k, v in overrides.items()]))
-        self.pub = ros.node.create_publisher(Vector3Stamped, "measurements/rae", 100)
-        self.clock_pub = ros.node.create_publisher(ClockMsg, "/clock", 10)
-        assert ros.spin_until(lambda: self.pub.get_subscription_count() > 0 and self.diagnostics
-                              and self.clock_pub.get_subscription_count() > 0, 30.0)
-
-    def stamp(self, k: int) -> int:
-        return self.base + int(round(self.scenario.times[k] * S))
 
     def clock(self, stamp: int) -> None:
         """Set ``/clock`` to ``stamp`` (forward or back) and wait until the estimator's clock reads it."""
