@@ -112,7 +112,7 @@ def test_installed_estimator_refuses_bad_parameters(workspace):
                             timeout=120)
     assert result.returncode == 2, result.stderr
     assert "refusing to start" in result.stderr
-    assert "'filter' = 'bogus' is not a known filter; choose one of gpf, gpf-mm, spf, ekf, ukf, enkf, gpf-single" in result.stderr
+    assert "'filter' = 'bogus' is not a known filter; choose one of gpf, gpf-mm, gpf-ladder, spf, ekf, ukf, enkf, gpf-single" in result.stderr
 
 
 def test_installed_gpf_nav_runs_where_ros2_run_finds_it(workspace):

@@ -397,7 +397,7 @@ def test_bad_inputs_are_dropped_counted_and_never_leak_nan(ros):
 
 # --- parameters ---------------------------------------------------------------------------------------
 @pytest.mark.parametrize("name, value, text", [
-    ("filter", "bogus", "'filter' = 'bogus' is not a known filter; choose one of gpf, gpf-mm, spf, ekf, ukf, enkf, gpf-single"),
+    ("filter", "bogus", "'filter' = 'bogus' is not a known filter; choose one of gpf, gpf-mm, gpf-ladder, spf, ekf, ukf, enkf, gpf-single"),
     ("n_particles", -5, "'n_particles' = -5 must be an integer >= 1"),
     ("ess_threshold", 1.5, "'ess_threshold' (tau) = 1.5 must lie in (0, 1]"),
     ("ess_threshold", 0.0, "'ess_threshold' (tau) = 0.0 must lie in (0, 1]"),
