@@ -5,8 +5,7 @@ the message-level checks of :mod:`gpf_nav.estimator.input_checks` and publishes.
 of ROS time. Rules:
 
 * A measurement at stamp ``t`` runs ``predict((t - t_filter) s, u)`` then ``update(y, sensor)``, ``u`` being
-  the world-frame specific force of the latest IMU message stamped strictly before ``t`` (zero-order hold;
-  none when there is no such sample within ``imu_timeout`` s before ``t``); ``sensor`` None is the model's
+  the IMU input held at ``t`` (:mod:`gpf_nav.estimator.imu_hold`); ``sensor`` None is the model's
   own measurement (rae, range). A stream with a gate (``gates``) is first tested on the predicted estimate
   (:func:`gpf_nav.sensors.innovation_distance`, chi-square; with the sensor's estimated bias and its
   sigma when it has bias states): refused as ``innovation_gate`` (the filter
@@ -21,14 +20,8 @@ of ROS time. Rules:
   (:class:`gpf_nav.estimator.input_checks.ReapplyBudget`: ``reapply_budget`` s per second of the filter's time,
   at most ``history_length`` s saved up): a late measurement whose lateness exceeds what is left is refused
   (``reapply_budget``), so a stream of late data cannot take more than that share of the work.
-* An IMU sample delivered after a measurement stamped after it (the topics arrive in any order) that
-  should have been that measurement's input re-applies the history from there in the same way
-  (``late_imu_count``), so the estimate does not depend on the order of the two topics. The
-  re-application waits until the IMU has caught up with the filter's time (a sample stamped at or after
-  it) or the next measurement, whichever comes first, and runs once from the earliest such sample: an IMU
-  stream lagging by many samples (a backlog after a stall) costs one re-application, not one per sample,
-  which would keep the node too busy to catch up. Predictions between measurements (:meth:`extrapolate`)
-  meanwhile hold the inputs known so far.
+* The IMU input and IMU samples delivered after the measurement they precede: :mod:`gpf_nav.estimator.imu_hold`
+  (``late_imu_count``).
 * Initialisation, first match wins: the ``initial_state`` parameter (at ``initial_stamp``, or at the
   first measurement when that is negative); a ``set_state`` (full state) or ``set_pose`` (position)
   message; else the first ``init_window`` measurements through
@@ -53,7 +46,6 @@ from __future__ import annotations
 
 import copy
 import time
-from collections import deque
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Callable
@@ -67,16 +59,11 @@ from gpf_nav.filters.interface import COMPENSATION, COSTATE, GATE, MODEL_PROBABI
 from gpf_nav.integrity import ConsistencyMonitor, ConsistencyStatus, CostateMonitor, IntegrityStatus, innovation_moments
 from gpf_nav.estimator.engine_config import NS, EngineConfig
 from gpf_nav.estimator.history import Entry, History
+from gpf_nav.estimator.imu_hold import ImuHold
 from gpf_nav.estimator.initialization import batch_initial_state
 from gpf_nav.sensors import ModelSensor, innovation_distance
 from gpf_nav.estimator.input_checks import Counters, RateLimiter, ReapplyBudget, check_timing
 
-LATE_IMU_MEMORY = 50
-"""Inputs after a late IMU sample during which the newest input keeps a snapshot too
-(:mod:`gpf_nav.estimator.history`): a measurement whose IMU sample comes after it then re-applies one input,
-not up to ``SNAPSHOT_EVERY`` of them, for a copy of the filter per input (a sixth of an update)."""
-IMU_SAMPLES = 4096
-"""IMU samples kept (the zero-order hold looks them up, also when re-applying the history)."""
 LEVEL_RANK = {"OK": 0, "WARN": 1, "FAULT": 2}
 FAULT_ACTIONS = ("none", "measurements", "prior")
 """What a persistent integrity FAULT leads to (``EngineConfig.fault_action``)."""
@@ -181,6 +168,7 @@ class EstimatorEngine:
         self.fault_reinit_count = 0           # re-initialisations after a persistent FAULT (cumulative)
         self._prior: tuple[np.ndarray, np.ndarray, int] | None = None  # the last initial state (PRIOR_SOURCES)
         self._model_sensor = ModelSensor(model)
+        self.imu_hold = ImuHold(config)
         self.reset()
 
     # --- state -----------------------------------------------------------------------------------------
@@ -199,14 +187,11 @@ class EstimatorEngine:
         self.cov: np.ndarray | None = None
         self.version = 0                      # bumps at every change of the filter state
         self._good: tuple[np.ndarray, np.ndarray, int] | None = None
-        self._imu: deque[tuple[int, np.ndarray]] = deque(maxlen=IMU_SAMPLES)
+        self.imu_hold.reset()
         self.history = History(int(round(self.config.history_length * NS)))
         self._budget = ReapplyBudget(self.config.reapply_budget, self.config.history_length, 0)
         self._streaks: dict[str, int] = {}   # gate refusals in a row per stream
         self.late_count = 0                   # late measurements fused at their stamp
-        self.late_imu_count = 0               # IMU samples that came after a measurement that needed them
-        self._late_imu_ns: int | None = None  # the earliest of them not yet re-applied
-        self._late_imu_recent = 0             # inputs to come that keep an extra snapshot (LATE_IMU_MEMORY)
         self.replayed_count = 0               # inputs re-applied after them
         self.snapshot_failures = 0            # filter copies that failed (the history was emptied)
         self._init_buffer: list[tuple[int, np.ndarray]] = []
@@ -253,7 +238,7 @@ class EstimatorEngine:
         self._init_buffer = []
         self.history.clear()
         self._budget = ReapplyBudget(self.config.reapply_budget, self.config.history_length, t_ns)
-        self._late_imu_ns = None
+        self.imu_hold.forget_late()
         self._streaks = {}
         self._reset_monitor()
         self._store(t_ns)
@@ -369,8 +354,8 @@ class EstimatorEngine:
         the gate refused it (predicted only), ``"filter_error"`` after a recovery."""
         keep = self.history.length_ns > 0
         periodic = self.history.wants_snapshot()
-        extra = not periodic and self._late_imu_recent > 0  # the newest input's, while IMU samples come late
-        self._late_imu_recent = max(0, self._late_imu_recent - 1)
+        due = self.imu_hold.extra_snapshot_due()
+        extra = not periodic and due  # the newest input's, while IMU samples come late
         before = self._snapshot() if keep and (periodic or extra) else None
         keep = keep and (before is not None or len(self.history) > 0)  # (a failed copy emptied the history)
         entry = Entry(stamp_ns, stream, y, sensor, before, self.t_ns, dict(self._streaks),
@@ -477,42 +462,23 @@ class EstimatorEngine:
 
     def imu(self, stamp_ns: int, specific_force_world: np.ndarray, now_ns: int | None) -> tuple[bool, str]:
         """Hold a world-frame specific force ``(3,)`` [m/s^2] from ``stamp_ns`` on."""
-        last = self._imu[-1][0] if self._imu else None
-        ok, reason = check_timing(stamp_ns, last, now_ns, int(self.config.max_future * NS))
+        ok, reason = check_timing(stamp_ns, self.imu_hold.newest_ns, now_ns, int(self.config.max_future * NS))
         if not ok:
             self.counters.reject("imu", reason)
             return False, reason
         u = np.asarray(specific_force_world, dtype=float).copy()
-        self._imu.append((stamp_ns, u))
+        self.imu_hold.hold(stamp_ns, u)
         self.counters.accept("imu")
         if self.initialized and stamp_ns < self.t_ns:
-            self._late_imu(stamp_ns, u)
+            self.imu_hold.note_late(stamp_ns, u, self.history)
         else:
             self._apply_late_imu()  # caught up with the filter's time
         return True, ""
 
-    def _late_imu(self, stamp_ns: int, u: np.ndarray) -> None:
-        """An IMU sample that arrives after a measurement stamped after it (another topic, delivered
-        first): when it is the input that measurement's prediction should have held, the history is to be
-        re-applied from it, as for a late measurement, so the estimate is that of delivery in stamp order
-        (:meth:`_apply_late_imu`, deferred). Beyond the history, or too old to be that input
-        (``imu_timeout``), nothing changes. (An earlier sample than the newest one is ``stale_stamp`` in
-        :meth:`imu`.)"""
-        split = self.history.split(stamp_ns)
-        if split is None or self._input_at(self.history.entries[split[0]].t_ns) is not u:
-            return
-        self.late_imu_count += 1
-        self._late_imu_recent = LATE_IMU_MEMORY
-        if self._late_imu_ns is None:  # (samples come in stamp order: the first is the earliest)
-            self._late_imu_ns = stamp_ns
-
     def _apply_late_imu(self) -> None:
-        """Re-apply the history from the earliest late IMU sample not yet applied (:meth:`_late_imu`), once
-        for all of them."""
-        if self._late_imu_ns is None:
-            return
-        split = self.history.split(self._late_imu_ns)
-        self._late_imu_ns = None
+        """Re-apply the history from the earliest late IMU sample not yet applied, once for all of them."""
+        stamp_ns = self.imu_hold.take_late()
+        split = None if stamp_ns is None else self.history.split(stamp_ns)
         if split is None:
             return
         redo = self._rewind(split[1])
@@ -586,17 +552,11 @@ class EstimatorEngine:
             cov[np.ix_(p, p)] = position_cov
         return self._reinitialize("set_pose", stamp_ns, mean, cov)
 
-    def _input_at(self, stamp_ns: int) -> np.ndarray | None:
-        for t, u in reversed(self._imu):
-            if t < stamp_ns:
-                return u if (stamp_ns - t) * 1e-9 <= self.config.imu_timeout else None
-        return None
-
     def _predict_to(self, stamp_ns: int) -> None:
         dt = (stamp_ns - self.t_ns) * 1e-9
         self._last_dt = dt
         if dt > 0.0:
-            self.filter.predict(dt, self._input_at(stamp_ns))
+            self.filter.predict(dt, self.imu_hold.input_at(stamp_ns))
         self.t_ns = stamp_ns
 
     # --- outputs ---------------------------------------------------------------------------------------
@@ -617,7 +577,7 @@ class EstimatorEngine:
         try:
             dt = (now_ns - self._shadow_ns) * 1e-9
             if dt > 0.0:
-                self._shadow.predict(dt, self._input_at(now_ns))
+                self._shadow.predict(dt, self.imu_hold.input_at(now_ns))
                 self._shadow_ns = now_ns
             mean = np.array(self._shadow.mean, dtype=float)
             cov = np.array(self._shadow.covariance, dtype=float)
@@ -764,14 +724,16 @@ class EstimatorEngine:
     def imu_age(self, now_ns: int | None) -> float | None:
         """Seconds from the newest IMU sample's stamp to ``now_ns`` (None before the first one). Past
         ``imu_timeout`` the filter predicts without an input."""
-        if not self._imu or not now_ns:
-            return None
-        return (now_ns - self._imu[-1][0]) * 1e-9
+        return self.imu_hold.age(now_ns)
 
     def imu_silent(self, now_ns: int | None) -> bool:
         """Whether an IMU heard before has been silent for longer than ``imu_timeout`` at ``now_ns``."""
-        age = self.imu_age(now_ns)
-        return age is not None and age > self.config.imu_timeout
+        return self.imu_hold.silent(now_ns)
+
+    @property
+    def late_imu_count(self) -> int:
+        """IMU samples that came after a measurement that needed them."""
+        return self.imu_hold.late_count
 
     def filter_stats(self) -> dict:
         """ESS/N and co-state figures of a particle filter, and the estimated unmodelled acceleration
