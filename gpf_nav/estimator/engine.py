@@ -29,8 +29,7 @@ of ROS time. Rules:
   while measurements are buffered for that fit (say the latched prior, delivered just after the first
   live measurement) is not stale: the filter starts from it and then takes the buffered measurements
   stamped at or after it.
-* Predictions between measurements (:meth:`extrapolate`) run on a copy of the filter, so they never
-  move the filter's own time: a measurement that arrives late (but newer than the last one) is used.
+* Predictions between measurements: :mod:`gpf_nav.estimator.extrapolation`.
 * If the filter raises or its mean/covariance become non-finite, it is rebuilt from the last good
   estimate (covariance inflated), predicted to the failing stamp, and the event is counted
   (``reinit_count``; diagnostics go to ERROR for ``reinit_hold`` s). A re-initialisation the core
@@ -58,6 +57,7 @@ from gpf_nav.filters import SensorBiasFilter
 from gpf_nav.filters.interface import COMPENSATION, COSTATE, GATE, MODEL_PROBABILITIES, RESAMPLING, TEMPERING
 from gpf_nav.integrity import ConsistencyMonitor, ConsistencyStatus, CostateMonitor, IntegrityStatus, innovation_moments
 from gpf_nav.estimator.engine_config import NS, EngineConfig
+from gpf_nav.estimator.extrapolation import Extrapolation
 from gpf_nav.estimator.history import Entry, History
 from gpf_nav.estimator.imu_hold import ImuHold
 from gpf_nav.estimator.initialization import batch_initial_state
@@ -169,6 +169,7 @@ class EstimatorEngine:
         self._prior: tuple[np.ndarray, np.ndarray, int] | None = None  # the last initial state (PRIOR_SOURCES)
         self._model_sensor = ModelSensor(model)
         self.imu_hold = ImuHold(config)
+        self.extrapolation = Extrapolation(config)
         self.reset()
 
     # --- state -----------------------------------------------------------------------------------------
@@ -196,9 +197,7 @@ class EstimatorEngine:
         self.snapshot_failures = 0            # filter copies that failed (the history was emptied)
         self._init_buffer: list[tuple[int, np.ndarray]] = []
         self.init_failures = 0                # batch fits that did not determine the state
-        self._shadow = None
-        self._shadow_version = -1
-        self._shadow_ns = None
+        self.extrapolation.drop()
         self.init_source = ""
         self._last_dt = 0.0
         self._reset_monitor()
@@ -303,7 +302,7 @@ class EstimatorEngine:
         self.fault_reinit_count += 1
         self.reinit_count += 1
         self._last_reinit_time = self.monotonic()
-        self._shadow = None
+        self.extrapolation.drop()
         t_ns = self.t_ns
         if self.config.fault_action == "prior" and self._prior is not None:
             mean, cov, t0 = self._prior
@@ -493,7 +492,7 @@ class EstimatorEngine:
         first = redo[0]
         self.filter, self.t_ns, self._streaks = first.before, first.before_ns, dict(first.streaks)
         self._core_recoveries = self.filter.recoveries
-        self._shadow = None
+        self.extrapolation.drop()
         return redo
 
     def set_state(self, stamp_ns: int, mean: np.ndarray, cov: np.ndarray, now_ns: int | None) -> tuple[bool, str]:
@@ -561,33 +560,10 @@ class EstimatorEngine:
 
     # --- outputs ---------------------------------------------------------------------------------------
     def extrapolate(self, now_ns: int, force: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
-        """Predicted ``(mean, cov)`` at ``now_ns`` from a copy of the filter (the filter is untouched).
-
-        None when not initialised, ``now_ns`` is not after the filter time, the horizon exceeds
-        ``max_extrapolation`` (unless ``force``) or the prediction is not finite.
-        """
-        if not self.initialized or now_ns <= self.t_ns:
-            return None
-        if not force and (now_ns - self.t_ns) * 1e-9 > self.config.max_extrapolation:
-            return None
-        if self._shadow is None or self._shadow_version != self.version or now_ns < self._shadow_ns:
-            self._shadow = copy.deepcopy(self.filter)
-            self._shadow_version = self.version
-            self._shadow_ns = self.t_ns
-        try:
-            dt = (now_ns - self._shadow_ns) * 1e-9
-            if dt > 0.0:
-                self._shadow.predict(dt, self.imu_hold.input_at(now_ns))
-                self._shadow_ns = now_ns
-            mean = np.array(self._shadow.mean, dtype=float)
-            cov = np.array(self._shadow.covariance, dtype=float)
-        except Exception:  # noqa: BLE001 - a failed prediction is just not published
-            self._shadow = None
-            return None
-        if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
-            self._shadow = None
-            return None
-        return mean, cov
+        """Predicted ``(mean (n,), cov (n, n))`` at ``now_ns`` from a copy of the filter (the filter is
+        untouched); None when not initialised, ``now_ns`` is not after the filter time, the horizon exceeds
+        ``max_extrapolation`` (unless ``force``) or the prediction is not finite."""
+        return self.extrapolation.estimate(self.filter, self.t_ns, self.version, now_ns, self.imu_hold, force)
 
     # --- recovery --------------------------------------------------------------------------------------
     def _recover(self, stamp_ns: int, why: str) -> None:
@@ -595,7 +571,7 @@ class EstimatorEngine:
         self.reinit_count += 1
         self.last_reinit_reason = why
         self._last_reinit_time = self.monotonic()
-        self._shadow = None
+        self.extrapolation.drop()
         if self._good is None:
             self.reset()
             return
