@@ -35,17 +35,14 @@ of ROS time. Rules:
   (``reinit_count``; diagnostics go to ERROR for ``reinit_hold`` s). A re-initialisation the core
   filter does by itself (its ``recoveries`` counter: all particles non-finite or weightless, ESS
   collapse with ``collapse_steps``) is counted and reported the same way.
-* After ``fault_updates`` updates in a row at which the co-state integrity monitor is at FAULT the filter
-  is re-initialised by ``fault_action``: ``"measurements"`` starts it again from the next ``init_window``
-  measurements (the batch fit, even with an ``initial_state``), ``"prior"`` from the last initial state
-  (parameters, ``set_state``, ``set_pose`` or batch fit) predicted to the filter's time; ``"none"`` leaves it
-  (the FAULT is only reported). Counted in ``fault_reinit_count`` and ``reinit_count``.
+* The monitors fed at each update, and what a persistent integrity FAULT leads to (``fault_action``,
+  counted in ``fault_reinit_count`` and ``reinit_count``): :mod:`gpf_nav.estimator.integrity_watch` and
+  :mod:`gpf_nav.estimator.consistency_watch`.
 """
 from __future__ import annotations
 
 import copy
 import time
-from dataclasses import dataclass
 from functools import lru_cache
 from typing import Callable
 
@@ -55,79 +52,19 @@ from scipy.stats import chi2
 
 from gpf_nav.filters import SensorBiasFilter
 from gpf_nav.filters.interface import COMPENSATION, COSTATE, GATE, MODEL_PROBABILITIES, RESAMPLING, TEMPERING
-from gpf_nav.integrity import ConsistencyMonitor, ConsistencyStatus, CostateMonitor, IntegrityStatus, innovation_moments
+from gpf_nav.integrity import ConsistencyMonitor, CostateMonitor
+from gpf_nav.estimator.consistency_watch import ConsistencyReport, ConsistencyWatch
 from gpf_nav.estimator.engine_config import NS, EngineConfig
 from gpf_nav.estimator.extrapolation import Extrapolation
 from gpf_nav.estimator.history import Entry, History
 from gpf_nav.estimator.imu_hold import ImuHold
+from gpf_nav.estimator.integrity_watch import IntegrityReport, IntegrityWatch
 from gpf_nav.estimator.initialization import batch_initial_state
-from gpf_nav.sensors import ModelSensor, innovation_distance
+from gpf_nav.sensors import innovation_distance
 from gpf_nav.estimator.input_checks import Counters, RateLimiter, ReapplyBudget, check_timing
 
-LEVEL_RANK = {"OK": 0, "WARN": 1, "FAULT": 2}
-FAULT_ACTIONS = ("none", "measurements", "prior")
-"""What a persistent integrity FAULT leads to (``EngineConfig.fault_action``)."""
 PRIOR_SOURCES = ("parameters", "set_state", "set_pose", "measurements")
 """Initialisations kept as the prior a ``fault_action: prior`` starts again from."""
-
-
-@dataclass(frozen=True)
-class IntegrityReport:
-    """What :meth:`EstimatorEngine.integrity` says about the co-state monitor.
-
-    Attributes:
-        state: ``"active"``, ``"disabled"`` (``monitor_enabled: false``) or ``"unavailable"`` (the
-            filter has no co-state: EKF, UKF, EnKF, SPF without ``compute_costate``).
-        level: the level reported: worst of the last update's and of the held alarms (``"OK"``,
-            ``"WARN"``, ``"FAULT"``); ``"OK"`` unless active.
-        status: the monitor's last :class:`IntegrityStatus` (None unless active).
-        alarm: the status of the alarm behind ``level`` when it is held (None when ``level`` is the
-            last update's own), and ``alarm_age`` its age [s, steady clock].
-        samples, rejected, skipped, quarantined: monitor samples since its last reset; samples it
-            ignored (non-finite); updates not fed (``dt = 0``); samples kept out of its reference.
-        fault_updates, warn_updates: updates at FAULT / at WARN since start-up (cumulative).
-        resets: monitor resets since start-up.
-        error: the last exception the monitor raised ("" if none; the monitor is then reset).
-    """
-
-    state: str
-    level: str = "OK"
-    status: IntegrityStatus | None = None
-    alarm: IntegrityStatus | None = None
-    alarm_age: float = 0.0
-    samples: int = 0
-    rejected: int = 0
-    skipped: int = 0
-    quarantined: int = 0
-    fault_updates: int = 0
-    warn_updates: int = 0
-    resets: int = 0
-    error: str = ""
-
-
-@dataclass(frozen=True)
-class ConsistencyReport:
-    """What :meth:`EstimatorEngine.consistency_report` says about the consistency monitor
-    (:mod:`gpf_nav.integrity.consistency`).
-
-    Attributes:
-        level: ``"OK"``, ``"WARN"`` or ``"FAULT"``: the last update's, or ``"FAULT"`` while an alarm is held
-            (``monitor_hold``).
-        status: the monitor's last :class:`ConsistencyStatus`.
-        alarm: the held FAULT's status (None when ``level`` is the last update's) and ``alarm_age`` [s].
-        updates, rejected: updates tested and updates that could not be (since the last reset).
-        fault_updates: updates at FAULT since start-up (cumulative).
-        error: the last exception the monitor raised ("" if none; the monitor is then reset).
-    """
-
-    level: str
-    status: ConsistencyStatus
-    alarm: ConsistencyStatus | None
-    alarm_age: float
-    updates: int
-    rejected: int
-    fault_updates: int
-    error: str
 
 
 @lru_cache(maxsize=64)
@@ -156,19 +93,11 @@ class EstimatorEngine:
         self.last_reinit_reason = ""
         self._last_reinit_time = -np.inf
         self._rate = RateLimiter(config.max_measurement_rate)
-        self.monitor = CostateMonitor(**config.monitor) if config.monitor is not None else None
-        self.integrity_fault_updates = 0      # cumulative, like the counters
-        self.integrity_warn_updates = 0
-        self.integrity_resets = 0
-        self._skipped = 0                     # updates the integrity monitor skipped since its reset
-        self.integrity_error = ""
-        self.consistency = ConsistencyMonitor(**config.consistency) if config.consistency is not None else None
-        self.consistency_fault_updates = 0    # cumulative
-        self.consistency_error = ""
         self.fault_reinit_count = 0           # re-initialisations after a persistent FAULT (cumulative)
         self._prior: tuple[np.ndarray, np.ndarray, int] | None = None  # the last initial state (PRIOR_SOURCES)
-        self._model_sensor = ModelSensor(model)
         self.imu_hold = ImuHold(config)
+        self.integrity_watch = IntegrityWatch(config, self._now)
+        self.consistency_watch = ConsistencyWatch(config, model, self._now)
         self.extrapolation = Extrapolation(config)
         self.reset()
 
@@ -200,8 +129,8 @@ class EstimatorEngine:
         self.extrapolation.drop()
         self.init_source = ""
         self._last_dt = 0.0
-        self._reset_monitor()
-        self._consistency_alarm: tuple[float, ConsistencyStatus] | None = None
+        self._reset_monitors()
+        self.consistency_watch.drop_alarm()
         cfg = self.config
         if not self._fits_data and cfg.initial_stamp >= 0.0:
             self._initialize(cfg.initial_state, np.diag(cfg.initial_std ** 2),
@@ -239,7 +168,7 @@ class EstimatorEngine:
         self._budget = ReapplyBudget(self.config.reapply_budget, self.config.history_length, t_ns)
         self.imu_hold.forget_late()
         self._streaks = {}
-        self._reset_monitor()
+        self._reset_monitors()
         self._store(t_ns)
 
     def _store(self, t_ns: int) -> bool:
@@ -292,13 +221,13 @@ class EstimatorEngine:
             self.counters.reject(stream, reason)
             return False, reason
         self.counters.accept(stream)
-        if self.config.fault_action != "none" and self._fault_streak >= self.config.fault_updates:
+        if self.integrity_watch.persistent_fault:
             self._act_on_fault()
         return True, ""
 
     def _act_on_fault(self) -> None:
         """Re-initialise after ``fault_updates`` integrity FAULT updates in a row (``fault_action``)."""
-        why = f"integrity FAULT for {self._fault_streak} updates in a row"
+        why = f"integrity FAULT for {self.integrity_watch.fault_streak} updates in a row"
         self.fault_reinit_count += 1
         self.reinit_count += 1
         self._last_reinit_time = self.monotonic()
@@ -364,7 +293,7 @@ class EstimatorEngine:
             gated = self._gated(stream, sensor, y)
             if not gated:
                 if feed_monitor:
-                    self._test_consistency(y, sensor)
+                    self.consistency_watch.test(self.filter, y, sensor)
                 if sensor is None:
                     self.filter.update(y)
                 else:
@@ -380,7 +309,8 @@ class EstimatorEngine:
         if gated:
             return "innovation_gate"
         if not self._check_core_recovery() and feed_monitor and sensor is None:
-            self._feed_monitor()
+            if not self.integrity_watch.feed(self.filter, self._last_dt):
+                self._reset_monitors()
         self.last_update_ns = stamp_ns
         return ""
 
@@ -423,7 +353,7 @@ class EstimatorEngine:
             self.reinit_count += recoveries - self._core_recoveries
             self.last_reinit_reason = f"core filter recovery: {self.filter.last_recovery_reason}"
             self._last_reinit_time = self.monotonic()
-            self._reset_monitor()
+            self._reset_monitors()
         self._core_recoveries = recoveries
         return recovered
 
@@ -586,77 +516,33 @@ class EstimatorEngine:
             self.reset()
             self._good = good
 
-    # --- integrity -------------------------------------------------------------------------------------
-    def _reset_monitor(self) -> None:
-        self._fault_streak = 0                # updates in a row at FAULT
-        if self.consistency is not None:
-            self.consistency.reset()
-        if self.monitor is None:
-            return
-        if self.monitor.samples or self._skipped:
-            self.integrity_resets += 1
-        self.monitor.reset()
-        self._skipped = 0
-        self._alarms: dict[str, tuple[float, IntegrityStatus]] = {}
+    # --- monitors --------------------------------------------------------------------------------------
+    def _reset_monitors(self) -> None:
+        self.integrity_watch.reset()
+        self.consistency_watch.reset()
 
-    def _feed_monitor(self) -> None:
-        """Give the monitor the co-state of the update just made (never raises), over the components its
-        last co-state covers (the filter's ``costate_measured``)."""
-        if self.monitor is None or not self.has_costate:
-            return
-        if self._last_dt <= 0.0:
-            self._skipped += 1
-            return
-        measured = np.array(self.filter.costate_measured, dtype=bool)
-        try:
-            status = self.monitor.update(np.asarray(self.filter.costate_mean, dtype=float), measured)
-        except Exception as err:  # noqa: BLE001 - e.g. a co-state of another shape: start again
-            self.integrity_error = f"{type(err).__name__}: {err}"
-            self._reset_monitor()
-            return
-        self._fault_streak = self._fault_streak + 1 if status.level == "FAULT" else 0
-        if status.level == "FAULT":
-            self.integrity_fault_updates += 1
-        elif status.level == "WARN":
-            self.integrity_warn_updates += 1
-        if status.level != "OK":
-            self._alarms[status.level] = (self.monotonic(), status)
+    def _now(self) -> float:
+        """The steady clock [s], looked up at each call (``monotonic`` may be replaced)."""
+        return self.monotonic()
 
-    def _test_consistency(self, y: np.ndarray, sensor) -> None:
-        """Give the consistency monitor the innovation of ``y`` against the predicted estimate (never
-        raises): the filter's covariance too small for what the measurements show is a FAULT."""
-        if self.consistency is None:
-            return
-        try:
-            if isinstance(self.filter, SensorBiasFilter) and sensor is not None:
-                sensor, mean, cov = self.filter.predicted_estimate(sensor)
-            else:
-                mean, cov = self.filter.mean, self.filter.covariance
-            r, S = innovation_moments(sensor if sensor is not None else self._model_sensor, y, mean, cov,
-                                      self.filter.time)
-            status = self.consistency.update(r, S)
-        except Exception as err:  # noqa: BLE001 - a monitor failure must not stop the update
-            self.consistency_error = f"{type(err).__name__}: {err}"
-            self.consistency.reset()
-            return
-        if status.level == "FAULT":
-            self.consistency_fault_updates += 1
-            self._consistency_alarm = (self.monotonic(), status)
+    @property
+    def monitor(self) -> CostateMonitor | None:
+        """The co-state integrity monitor (None: disabled)."""
+        return self.integrity_watch.monitor
+
+    @property
+    def consistency(self) -> ConsistencyMonitor | None:
+        """The consistency monitor (None: disabled)."""
+        return self.consistency_watch.monitor
+
+    @property
+    def integrity_fault_updates(self) -> int:
+        """Updates at which the co-state monitor was at FAULT (cumulative)."""
+        return self.integrity_watch.fault_updates
 
     def consistency_report(self) -> ConsistencyReport | None:
         """The consistency monitor's state for the diagnostics (None when disabled)."""
-        m = self.consistency
-        if m is None:
-            return None
-        alarm, age = None, 0.0
-        if self._consistency_alarm is not None and m.status.level != "FAULT":
-            t, held = self._consistency_alarm
-            age = self.monotonic() - t
-            if self.config.monitor_hold < 0 or age < self.config.monitor_hold:
-                alarm = held
-        level = "FAULT" if alarm is not None else m.status.level
-        return ConsistencyReport(level, m.status, alarm, age, m.updates, m.rejected,
-                                 self.consistency_fault_updates, self.consistency_error)
+        return self.consistency_watch.report()
 
     def observability(self):
         """The filter's :class:`~gpf_nav.integrity.observability.ObservabilityReport` (None before the
@@ -670,25 +556,7 @@ class EstimatorEngine:
 
     def integrity(self) -> IntegrityReport:
         """The co-state monitor's state for the diagnostics (see :class:`IntegrityReport`)."""
-        common = dict(fault_updates=self.integrity_fault_updates, warn_updates=self.integrity_warn_updates,
-                      resets=self.integrity_resets, error=self.integrity_error)
-        if self.monitor is None:
-            return IntegrityReport("disabled", **common)
-        if not self.has_costate:
-            return IntegrityReport("unavailable", **common)
-        m = self.monitor
-        status = m.status
-        level, alarm, age = status.level, None, 0.0
-        now = self.monotonic()
-        for held in ("FAULT", "WARN"):
-            if held not in self._alarms or LEVEL_RANK[held] <= LEVEL_RANK[level]:
-                continue
-            t, s = self._alarms[held]
-            if self.config.monitor_hold < 0 or now - t < self.config.monitor_hold:
-                level, alarm, age = held, s, now - t
-                break
-        return IntegrityReport("active", level, status, alarm, age, m.samples, m.rejected, self._skipped,
-                               m.quarantined, **common)
+        return self.integrity_watch.report(self.filter)
 
     # --- summaries -------------------------------------------------------------------------------------
     def measurement_age(self, now_ns: int | None) -> float | None:

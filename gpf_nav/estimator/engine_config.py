@@ -31,5 +31,5 @@ class EngineConfig:
     reapply_budget: float = 0.5             # s of lateness re-applied per s of filter time (ReapplyBudget); 0: unlimited
     gates: dict = field(default_factory=dict)  # stream -> chi-square probability of its innovation gate; 0: off
     gate_limit: int = 5                     # after this many gate refusals in a row the next one is used
-    fault_action: str = "none"              # engine.FAULT_ACTIONS: re-initialise after a persistent FAULT
+    fault_action: str = "none"              # integrity_watch.FAULT_ACTIONS: re-initialise after a persistent FAULT
     fault_updates: int = 30                 # integrity FAULT updates in a row that make it persistent
