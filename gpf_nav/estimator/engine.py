@@ -6,20 +6,10 @@ of ROS time. Rules:
 
 * A measurement at stamp ``t`` runs ``predict((t - t_filter) s, u)`` then ``update(y, sensor)``, ``u`` being
   the IMU input held at ``t`` (:mod:`gpf_nav.estimator.imu_hold`); ``sensor`` None is the model's
-  own measurement (rae, range). A stream with a gate (``gates``) is first tested on the predicted estimate
-  (:func:`gpf_nav.sensors.innovation_distance`, chi-square; with the sensor's estimated bias and its
-  sigma when it has bias states): refused as ``innovation_gate`` (the filter
-  stays predicted to ``t``) unless ``gate_limit`` were refused in a row.
-* A measurement stamped before the filter's time, by at most ``history_length`` s, is fused at its own
-  stamp: the filter is restored from the last snapshot taken before it (see
-  :mod:`gpf_nav.estimator.history`), the inputs between are re-applied, it is updated with the late
-  input, and the later inputs are re-applied; the result equals in-order delivery bit for bit. Older stamps are refused (``older_than_history``), and so are
-  stamps within it but before the filter's (re-)initialisation (``stale_stamp``); more than ``max_future`` s ahead of the
-  node clock too (``future_stamp``). With ``history_length`` 0 every stamp before the filter's time is
-  ``stale_stamp``. Re-application is paid from a budget in seconds of stamps
-  (:class:`gpf_nav.estimator.input_checks.ReapplyBudget`: ``reapply_budget`` s per second of the filter's time,
-  at most ``history_length`` s saved up): a late measurement whose lateness exceeds what is left is refused
-  (``reapply_budget``), so a stream of late data cannot take more than that share of the work.
+  own measurement (rae, range). Stamps more than ``max_future`` s ahead of the node clock are refused
+  (``future_stamp``).
+* The innovation gate, and measurements stamped before the filter's time fused at their stamp (the
+  history, the re-application budget): :mod:`gpf_nav.estimator.measurements`.
 * The IMU input and IMU samples delivered after the measurement they precede: :mod:`gpf_nav.estimator.imu_hold`
   (``late_imu_count``).
 * Initialisation, first match wins: the ``initial_state`` parameter (at ``initial_stamp``, or at the
@@ -41,16 +31,11 @@ of ROS time. Rules:
 """
 from __future__ import annotations
 
-import copy
 import time
-from functools import lru_cache
 from typing import Callable
 
 import numpy as np
 
-from scipy.stats import chi2
-
-from gpf_nav.filters import SensorBiasFilter
 from gpf_nav.filters.interface import COMPENSATION, COSTATE, GATE, MODEL_PROBABILITIES, RESAMPLING, TEMPERING
 from gpf_nav.integrity import ConsistencyMonitor, CostateMonitor
 from gpf_nav.estimator.consistency_watch import ConsistencyReport, ConsistencyWatch
@@ -60,16 +45,11 @@ from gpf_nav.estimator.history import Entry, History
 from gpf_nav.estimator.imu_hold import ImuHold
 from gpf_nav.estimator.integrity_watch import IntegrityReport, IntegrityWatch
 from gpf_nav.estimator.initialization import batch_initial_state
-from gpf_nav.sensors import innovation_distance
-from gpf_nav.estimator.input_checks import Counters, RateLimiter, ReapplyBudget, check_timing
+from gpf_nav.estimator.input_checks import Counters, RateLimiter, check_timing
+from gpf_nav.estimator.measurements import InnovationGate, LateFusion
 
 PRIOR_SOURCES = ("parameters", "set_state", "set_pose", "measurements")
 """Initialisations kept as the prior a ``fault_action: prior`` starts again from."""
-
-
-@lru_cache(maxsize=64)
-def _chi2_threshold(probability: float, dof: int) -> float:
-    return float(chi2.ppf(probability, dof))
 
 
 class EstimatorEngine:
@@ -95,6 +75,8 @@ class EstimatorEngine:
         self._rate = RateLimiter(config.max_measurement_rate)
         self.fault_reinit_count = 0           # re-initialisations after a persistent FAULT (cumulative)
         self._prior: tuple[np.ndarray, np.ndarray, int] | None = None  # the last initial state (PRIOR_SOURCES)
+        self.gate = InnovationGate(config)
+        self.fusion = LateFusion(config, step=self._update, restore=self._restore)
         self.imu_hold = ImuHold(config)
         self.integrity_watch = IntegrityWatch(config, self._now)
         self.consistency_watch = ConsistencyWatch(config, model, self._now)
@@ -118,12 +100,8 @@ class EstimatorEngine:
         self.version = 0                      # bumps at every change of the filter state
         self._good: tuple[np.ndarray, np.ndarray, int] | None = None
         self.imu_hold.reset()
-        self.history = History(int(round(self.config.history_length * NS)))
-        self._budget = ReapplyBudget(self.config.reapply_budget, self.config.history_length, 0)
-        self._streaks: dict[str, int] = {}   # gate refusals in a row per stream
-        self.late_count = 0                   # late measurements fused at their stamp
-        self.replayed_count = 0               # inputs re-applied after them
-        self.snapshot_failures = 0            # filter copies that failed (the history was emptied)
+        self.fusion.reset()
+        self.gate.streaks = {}
         self._init_buffer: list[tuple[int, np.ndarray]] = []
         self.init_failures = 0                # batch fits that did not determine the state
         self.extrapolation.drop()
@@ -158,16 +136,14 @@ class EstimatorEngine:
         self.filter = fresh
         self._core_recoveries = self.filter.recoveries
         self.t_ns = int(t_ns)
-        self._init_ns = int(t_ns)
         self.init_source = source
         if source in PRIOR_SOURCES:
             self._prior = (np.array(mean, dtype=float), np.array(cov, dtype=float), int(t_ns))
         self._from_data = False
         self._init_buffer = []
-        self.history.clear()
-        self._budget = ReapplyBudget(self.config.reapply_budget, self.config.history_length, t_ns)
+        self.fusion.restart(t_ns)
         self.imu_hold.forget_late()
-        self._streaks = {}
+        self.gate.streaks = {}
         self._reset_monitors()
         self._store(t_ns)
 
@@ -197,10 +173,11 @@ class EstimatorEngine:
         ok, reason = check_timing(stamp_ns, last, now_ns, int(self.config.max_future * NS))
         late = ok and self.initialized and stamp_ns < self.t_ns
         if late:
-            ok, reason = self._late_allowed(stamp_ns)
+            reason = self.fusion.refusal(self.t_ns, stamp_ns)
+            ok = not reason
         if ok and not self._rate.allow(self.monotonic()):
             ok, reason = False, "rate_limit"
-        if ok and late and not self._budget.spend(self.t_ns, (self.t_ns - stamp_ns) * 1e-9):
+        if ok and late and not self.fusion.afford(self.t_ns, stamp_ns):
             ok, reason = False, "reapply_budget"
         if ok and not self.initialized and sensor is not None and self._fits_data:
             ok, reason = False, "not_initialized"  # only the model's own measurements initialise
@@ -216,7 +193,7 @@ class EstimatorEngine:
                                  stamp_ns, "parameters")
             else:
                 return self._buffer(stamp_ns, y, stream)
-        reason = self._late(stamp_ns, y, stream, sensor) if late else self._update(stamp_ns, y, stream, sensor)
+        reason = self.fusion.fuse(stamp_ns, y, stream, sensor) if late else self._update(stamp_ns, y, stream, sensor)
         if reason:
             self.counters.reject(stream, reason)
             return False, reason
@@ -239,7 +216,7 @@ class EstimatorEngine:
                 self._initialize(mean, cov, t0, "prior")
                 self._predict_to(t_ns)
                 if self._store(t_ns):
-                    self._init_ns = t_ns  # the stamps before it belong to the state given up
+                    self.fusion.start_ns = t_ns  # the stamps before it belong to the state given up
                     self.last_reinit_reason = f"{why}: re-initialised from the last prior"
                     return
             except Exception:  # noqa: BLE001 - a prior that cannot be predicted: start from the data
@@ -249,48 +226,15 @@ class EstimatorEngine:
         self.last_measurement_ns = last  # the fit takes only measurements after the ones given up
         self.last_reinit_reason = f"{why}: re-initialising from the next measurements"
 
-    def _late_allowed(self, stamp_ns: int) -> tuple[bool, str]:
-        """Whether a measurement stamped before the filter's time can be fused at its stamp."""
-        if self.config.history_length <= 0.0:
-            return False, "stale_stamp"
-        if (self.t_ns - stamp_ns) * 1e-9 > self.config.history_length:
-            return False, "older_than_history"
-        if stamp_ns < self._init_ns:
-            return False, "stale_stamp"
-        if self.history.split(stamp_ns) is None:
-            return False, "older_than_history"
-        return True, ""
-
-    def _late(self, stamp_ns: int, y: np.ndarray, stream: str, sensor) -> str:
-        """Fuse a measurement stamped before the filter's time at its stamp: restore the last snapshot
-        before it, re-apply the inputs between, then the late one, then the inputs stamped after it
-        (their counters are not counted again; the monitor is not fed again)."""
-        i, j = self.history.split(stamp_ns)
-        redo = self._rewind(j)
-        for entry in redo[:i - j]:
-            self._update(entry.t_ns, entry.y, entry.stream, entry.sensor, feed_monitor=False)
-        reason = self._update(stamp_ns, y, stream, sensor)
-        for entry in redo[i - j:]:
-            self._update(entry.t_ns, entry.y, entry.stream, entry.sensor, feed_monitor=False)
-        self.late_count += 1
-        self.replayed_count += len(redo)
-        return reason
-
     def _update(self, stamp_ns: int, y: np.ndarray, stream: str = "rae", sensor=None,
                 feed_monitor: bool = True) -> str:
         """Predict to ``stamp_ns`` and update with ``y``: ``""`` when updated, ``"innovation_gate"`` when
         the gate refused it (predicted only), ``"filter_error"`` after a recovery."""
-        keep = self.history.length_ns > 0
-        periodic = self.history.wants_snapshot()
-        due = self.imu_hold.extra_snapshot_due()
-        extra = not periodic and due  # the newest input's, while IMU samples come late
-        before = self._snapshot() if keep and (periodic or extra) else None
-        keep = keep and (before is not None or len(self.history) > 0)  # (a failed copy emptied the history)
-        entry = Entry(stamp_ns, stream, y, sensor, before, self.t_ns, dict(self._streaks),
-                      extra=extra and before is not None)
+        entry = self.fusion.entry(self.filter, self.t_ns, stamp_ns, stream, y, sensor, self.gate.streaks,
+                                  self.imu_hold.extra_snapshot_due())
         try:
             self._predict_to(stamp_ns)
-            gated = self._gated(stream, sensor, y)
+            gated = self.gate.refuses(self.filter, stream, sensor, y)
             if not gated:
                 if feed_monitor:
                     self.consistency_watch.test(self.filter, y, sensor)
@@ -304,8 +248,7 @@ class EstimatorEngine:
         if not self._store(stamp_ns):
             self._recover(stamp_ns, "non-finite mean or covariance after the update")
             return "filter_error"
-        if keep:
-            self.history.append(entry)
+        self.fusion.keep(entry)
         if gated:
             return "innovation_gate"
         if not self._check_core_recovery() and feed_monitor and sensor is None:
@@ -313,37 +256,6 @@ class EstimatorEngine:
                 self._reset_monitors()
         self.last_update_ns = stamp_ns
         return ""
-
-    def _snapshot(self):
-        """A deep copy of the filter for the history. A filter that cannot be copied empties the history
-        (None): late stamps before this input are then ``older_than_history``."""
-        try:
-            return copy.deepcopy(self.filter)
-        except Exception:  # noqa: BLE001 - e.g. a user's filter wrapper: go on without late fusion
-            self.history.clear()
-            self.snapshot_failures += 1
-            return None
-
-    def _gated(self, stream: str, sensor, y: np.ndarray) -> bool:
-        """The innovation gate of ``stream`` (a sensor object's streams only) on the predicted estimate;
-        True refuses ``y``. Counts the refusals in a row; after ``gate_limit`` the next one passes."""
-        probability = self.config.gates.get(stream, 0.0)
-        if sensor is None or probability <= 0.0:
-            return False
-        if isinstance(self.filter, SensorBiasFilter):  # the sensor's estimated bias is part of its prediction
-            sensor, mean, cov = self.filter.predicted_estimate(sensor)
-        else:
-            mean, cov = self.filter.mean, self.filter.covariance
-        d2, k = innovation_distance(sensor, y, mean, cov, self.filter.time)
-        if k == 0 or d2 <= _chi2_threshold(probability, k):
-            self._streaks[stream] = 0
-            return False
-        streak = self._streaks.get(stream, 0)
-        if streak >= self.config.gate_limit:
-            self._streaks[stream] = 0
-            return False
-        self._streaks[stream] = streak + 1
-        return True
 
     def _check_core_recovery(self) -> bool:
         """Count a re-initialisation the core filter did by itself (and reset the monitor); True if so."""
@@ -399,7 +311,7 @@ class EstimatorEngine:
         self.imu_hold.hold(stamp_ns, u)
         self.counters.accept("imu")
         if self.initialized and stamp_ns < self.t_ns:
-            self.imu_hold.note_late(stamp_ns, u, self.history)
+            self.imu_hold.note_late(stamp_ns, u, self.fusion.history)
         else:
             self._apply_late_imu()  # caught up with the filter's time
         return True, ""
@@ -407,23 +319,16 @@ class EstimatorEngine:
     def _apply_late_imu(self) -> None:
         """Re-apply the history from the earliest late IMU sample not yet applied, once for all of them."""
         stamp_ns = self.imu_hold.take_late()
-        split = None if stamp_ns is None else self.history.split(stamp_ns)
-        if split is None:
-            return
-        redo = self._rewind(split[1])
-        for entry in redo:
-            self._update(entry.t_ns, entry.y, entry.stream, entry.sensor, feed_monitor=False)
-        self.replayed_count += len(redo)
+        if stamp_ns is not None:
+            self.fusion.reapply_from(stamp_ns)
 
-    def _rewind(self, j: int) -> list[Entry]:
-        """Take the history's inputs from index ``j`` on and restore the filter they were applied to (the
-        snapshot kept with input ``j``); returns them, to be re-applied."""
-        redo = self.history.take(j)
-        first = redo[0]
-        self.filter, self.t_ns, self._streaks = first.before, first.before_ns, dict(first.streaks)
+    def _restore(self, entry: Entry) -> None:
+        """Put back the filter a history ``entry`` was applied to (its snapshot), at its time, with the gate
+        streaks then."""
+        self.filter, self.t_ns = entry.before, entry.before_ns
+        self.gate.streaks = dict(entry.streaks)
         self._core_recoveries = self.filter.recoveries
         self.extrapolation.drop()
-        return redo
 
     def set_state(self, stamp_ns: int, mean: np.ndarray, cov: np.ndarray, now_ns: int | None) -> tuple[bool, str]:
         """(Re-)initialise at ``stamp_ns`` with a full state ``mean`` ``(n,)`` and covariance ``cov``
@@ -559,6 +464,26 @@ class EstimatorEngine:
         return self.integrity_watch.report(self.filter)
 
     # --- summaries -------------------------------------------------------------------------------------
+    @property
+    def history(self) -> History:
+        """The inputs of the last ``history_length`` s (:class:`gpf_nav.estimator.history.History`)."""
+        return self.fusion.history
+
+    @property
+    def late_count(self) -> int:
+        """Late measurements fused at their stamp."""
+        return self.fusion.late_count
+
+    @property
+    def replayed_count(self) -> int:
+        """Inputs re-applied after late measurements and late IMU samples."""
+        return self.fusion.replayed_count
+
+    @property
+    def snapshot_failures(self) -> int:
+        """Filter copies that failed (each emptied the history)."""
+        return self.fusion.snapshot_failures
+
     def measurement_age(self, now_ns: int | None) -> float | None:
         """Seconds from the last accepted measurement's stamp to ``now_ns`` (None if none yet)."""
         if self.last_measurement_ns is None or not now_ns:

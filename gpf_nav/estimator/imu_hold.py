@@ -5,13 +5,12 @@
   before ``t``.
 * An IMU sample delivered after a measurement stamped after it (the topics arrive in any order) that
   should have been that measurement's input is late: the history is re-applied from it in the same way as
-  for a late measurement (:meth:`gpf_nav.estimator.engine.EstimatorEngine.measurement`), so the estimate
-  does not depend on the order of the two topics. The re-application waits until the IMU has caught up
-  with the filter's time (a sample stamped at or after it) or the next measurement, whichever comes first,
-  and runs once from the earliest such sample: an IMU stream lagging by many samples (a backlog after a
-  stall) costs one re-application, not one per sample, which would keep the node too busy to catch up.
-  Predictions between measurements (:meth:`gpf_nav.estimator.engine.EstimatorEngine.extrapolate`)
-  meanwhile hold the inputs known so far.
+  for a late measurement (:mod:`gpf_nav.estimator.measurements`), so the estimate does not depend on the
+  order of the two topics. The re-application waits until the IMU has caught up with the filter's time (a
+  sample stamped at or after it) or the next measurement, whichever comes first, and runs once from the
+  earliest such sample: an IMU stream lagging by many samples (a backlog after a stall) costs one
+  re-application, not one per sample, which would keep the node too busy to catch up. Predictions between
+  measurements (:mod:`gpf_nav.estimator.extrapolation`) meanwhile hold the inputs known so far.
 """
 from __future__ import annotations
 
