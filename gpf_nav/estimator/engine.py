@@ -12,13 +12,8 @@ of ROS time. Rules:
   history, the re-application budget): :mod:`gpf_nav.estimator.measurements`.
 * The IMU input and IMU samples delivered after the measurement they precede: :mod:`gpf_nav.estimator.imu_hold`
   (``late_imu_count``).
-* Initialisation, first match wins: the ``initial_state`` parameter (at ``initial_stamp``, or at the
-  first measurement when that is negative); a ``set_state`` (full state) or ``set_pose`` (position)
-  message; else the first ``init_window`` measurements through
-  :func:`gpf_nav.estimator.initialization.batch_initial_state`. A ``set_state`` or ``set_pose`` that comes
-  while measurements are buffered for that fit (say the latched prior, delivered just after the first
-  live measurement) is not stale: the filter starts from it and then takes the buffered measurements
-  stamped at or after it.
+* What the filter is (re-)initialised from (parameters, ``set_state``, ``set_pose``, the batch fit of the
+  first measurements): :mod:`gpf_nav.estimator.startup`.
 * Predictions between measurements: :mod:`gpf_nav.estimator.extrapolation`.
 * If the filter raises or its mean/covariance become non-finite, it is rebuilt from the last good
   estimate (covariance inflated), predicted to the failing stamp, and the event is counted
@@ -44,12 +39,9 @@ from gpf_nav.estimator.extrapolation import Extrapolation
 from gpf_nav.estimator.history import Entry, History
 from gpf_nav.estimator.imu_hold import ImuHold
 from gpf_nav.estimator.integrity_watch import IntegrityReport, IntegrityWatch
-from gpf_nav.estimator.initialization import batch_initial_state
 from gpf_nav.estimator.input_checks import Counters, RateLimiter, check_timing
 from gpf_nav.estimator.measurements import InnovationGate, LateFusion
-
-PRIOR_SOURCES = ("parameters", "set_state", "set_pose", "measurements")
-"""Initialisations kept as the prior a ``fault_action: prior`` starts again from."""
+from gpf_nav.estimator.startup import StartUp
 
 
 class EstimatorEngine:
@@ -74,7 +66,7 @@ class EstimatorEngine:
         self._last_reinit_time = -np.inf
         self._rate = RateLimiter(config.max_measurement_rate)
         self.fault_reinit_count = 0           # re-initialisations after a persistent FAULT (cumulative)
-        self._prior: tuple[np.ndarray, np.ndarray, int] | None = None  # the last initial state (PRIOR_SOURCES)
+        self.startup = StartUp(config, model)
         self.gate = InnovationGate(config)
         self.fusion = LateFusion(config, step=self._update, restore=self._restore)
         self.imu_hold = ImuHold(config)
@@ -87,9 +79,7 @@ class EstimatorEngine:
     def reset(self, from_data: bool = False) -> None:
         """Back to the start-up state (counters are kept; they are cumulative); ``from_data``: initialise
         from the next measurements (the batch fit) even when an ``initial_state`` is configured."""
-        self._from_data = from_data
-        if not from_data:
-            self._prior = None
+        self.startup.reset(from_data)
         self.filter = self.factory()
         self._core_recoveries = 0
         self.t_ns: int | None = None          # ROS time of the filter state
@@ -102,22 +92,13 @@ class EstimatorEngine:
         self.imu_hold.reset()
         self.fusion.reset()
         self.gate.streaks = {}
-        self._init_buffer: list[tuple[int, np.ndarray]] = []
-        self.init_failures = 0                # batch fits that did not determine the state
         self.extrapolation.drop()
-        self.init_source = ""
         self._last_dt = 0.0
         self._reset_monitors()
         self.consistency_watch.drop_alarm()
-        cfg = self.config
-        if not self._fits_data and cfg.initial_stamp >= 0.0:
-            self._initialize(cfg.initial_state, np.diag(cfg.initial_std ** 2),
-                             int(round(cfg.initial_stamp * 1e9)), "parameters")
-
-    @property
-    def _fits_data(self) -> bool:
-        """Whether the next initialisation is the batch fit of measurements (rather than ``initial_state``)."""
-        return self.config.initial_state is None or self._from_data
+        t0_ns = self.startup.parameters_stamp_ns()
+        if t0_ns is not None:
+            self._initialize(*self.startup.parameters(), t0_ns, "parameters")
 
     @property
     def initialized(self) -> bool:
@@ -136,11 +117,7 @@ class EstimatorEngine:
         self.filter = fresh
         self._core_recoveries = self.filter.recoveries
         self.t_ns = int(t_ns)
-        self.init_source = source
-        if source in PRIOR_SOURCES:
-            self._prior = (np.array(mean, dtype=float), np.array(cov, dtype=float), int(t_ns))
-        self._from_data = False
-        self._init_buffer = []
+        self.startup.started(mean, cov, t_ns, source)
         self.fusion.restart(t_ns)
         self.imu_hold.forget_late()
         self.gate.streaks = {}
@@ -179,7 +156,7 @@ class EstimatorEngine:
             ok, reason = False, "rate_limit"
         if ok and late and not self.fusion.afford(self.t_ns, stamp_ns):
             ok, reason = False, "reapply_budget"
-        if ok and not self.initialized and sensor is not None and self._fits_data:
+        if ok and not self.initialized and sensor is not None and self.startup.fits_data:
             ok, reason = False, "not_initialized"  # only the model's own measurements initialise
         if not ok:
             self.counters.reject(stream, reason)
@@ -188,11 +165,9 @@ class EstimatorEngine:
         self.counters.masked += int(np.sum(~np.isfinite(y)))
         self.last_measurement_ns = max(stamp_ns, self.last_measurement_ns or 0)
         if not self.initialized:
-            if not self._fits_data:
-                self._initialize(self.config.initial_state, np.diag(self.config.initial_std ** 2),
-                                 stamp_ns, "parameters")
-            else:
+            if self.startup.fits_data:
                 return self._buffer(stamp_ns, y, stream)
+            self._initialize(*self.startup.parameters(), stamp_ns, "parameters")
         reason = self.fusion.fuse(stamp_ns, y, stream, sensor) if late else self._update(stamp_ns, y, stream, sensor)
         if reason:
             self.counters.reject(stream, reason)
@@ -210,8 +185,8 @@ class EstimatorEngine:
         self._last_reinit_time = self.monotonic()
         self.extrapolation.drop()
         t_ns = self.t_ns
-        if self.config.fault_action == "prior" and self._prior is not None:
-            mean, cov, t0 = self._prior
+        if self.config.fault_action == "prior" and self.startup.prior is not None:
+            mean, cov, t0 = self.startup.prior
             try:
                 self._initialize(mean, cov, t0, "prior")
                 self._predict_to(t_ns)
@@ -270,36 +245,18 @@ class EstimatorEngine:
         return recovered
 
     def _buffer(self, stamp_ns: int, y: np.ndarray, stream: str) -> tuple[bool, str]:
-        self._init_buffer.append((stamp_ns, y))
+        """Keep a measurement for the batch fit; start the filter when the fit is made."""
         self.counters.accept(stream)
-        window = max(2, int(self.config.init_window))
-        if len(self._init_buffer) < window:
-            return True, "buffered"
-        times = np.array([t for t, _ in self._init_buffer], dtype=np.int64)
-        ys = np.array([v for _, v in self._init_buffer])
-        seconds = (times - times[0]) * 1e-9
-        fit = None
-        if seconds[-1] > 0.0:
-            try:
-                fit = batch_initial_state(self.model, seconds, ys)
-            except Exception:  # noqa: BLE001 - a failed fit just waits for more data
-                fit = None
+        fit = self.startup.fit(stamp_ns, y)
         if fit is None:
-            self.init_failures += 1
-            self._init_buffer = self._init_buffer[-(window - 1):]  # slide the window
             return True, "buffered"
-        self._initialize(fit[0], fit[1], stamp_ns, "measurements")
+        self._initialize(*fit, stamp_ns, "measurements")
         self.last_update_ns = stamp_ns
         return True, ""
 
     def waiting_for(self) -> str:
         """What the uninitialised engine waits for, in words (for the node's periodic warning)."""
-        buffered, window = len(self._init_buffer), max(2, int(self.config.init_window))
-        text = f"waiting for set_state, set_pose or measurements ({buffered}/{window} buffered)"
-        if self.init_failures:
-            text += (f"; the batch fit failed {self.init_failures} times: it needs at least two "
-                     "measurements with range, azimuth and elevation (set initial_state or send set_pose)")
-        return text
+        return self.startup.waiting_for()
 
     def imu(self, stamp_ns: int, specific_force_world: np.ndarray, now_ns: int | None) -> tuple[bool, str]:
         """Hold a world-frame specific force ``(3,)`` [m/s^2] from ``stamp_ns`` on."""
@@ -345,7 +302,7 @@ class EstimatorEngine:
         return ok, reason
 
     def _reinitialize(self, stream: str, stamp_ns: int, mean: np.ndarray, cov: np.ndarray) -> tuple[bool, str]:
-        pending = [] if self.initialized else [(t, y) for t, y in self._init_buffer if t >= stamp_ns]
+        pending = [] if self.initialized else self.startup.buffered_since(stamp_ns)
         try:
             self._initialize(np.asarray(mean, dtype=float), np.asarray(cov, dtype=float), stamp_ns, stream)
         except Exception:  # noqa: BLE001 - e.g. a covariance the filter cannot factor
@@ -364,27 +321,15 @@ class EstimatorEngine:
         ok, reason = self._check_reinit_timing("set_pose", stamp_ns, now_ns)
         if not ok:
             return False, reason
-        n = self.model.state_dim
-        p, v = list(self.model.position_index), list(self.model.velocity_index)
-        mean = np.zeros(n)
-        cov = np.diag(self.config.initial_std ** 2)
+        estimate = None
         if self.initialized and self.mean is not None:
-            if stamp_ns >= self.t_ns:
-                est = self.extrapolate(stamp_ns, force=True)
-                est_mean, est_cov = est if est is not None else (self.mean, self.cov)
-            else:
-                est_mean, est_cov = self.mean, self.cov
-            mean[v] = est_mean[v]
-            cov[np.ix_(v, v)] = est_cov[np.ix_(v, v)]
-        elif self.config.initial_state is not None:
-            mean[v] = np.asarray(self.config.initial_state)[v]
-        else:
+            estimate = self.extrapolate(stamp_ns, force=True) if stamp_ns >= self.t_ns else None
+            estimate = estimate if estimate is not None else (self.mean, self.cov)
+        state = self.startup.pose(position, position_cov, estimate)
+        if state is None:
             self.counters.reject("set_pose", "no_velocity")
             return False, "no_velocity"
-        mean[p] = position
-        if position_cov is not None:
-            cov[np.ix_(p, p)] = position_cov
-        return self._reinitialize("set_pose", stamp_ns, mean, cov)
+        return self._reinitialize("set_pose", stamp_ns, *state)
 
     def _predict_to(self, stamp_ns: int) -> None:
         dt = (stamp_ns - self.t_ns) * 1e-9
@@ -464,6 +409,16 @@ class EstimatorEngine:
         return self.integrity_watch.report(self.filter)
 
     # --- summaries -------------------------------------------------------------------------------------
+    @property
+    def init_source(self) -> str:
+        """Where the filter's current initial state came from (:attr:`StartUp.source`)."""
+        return self.startup.source
+
+    @property
+    def init_failures(self) -> int:
+        """Batch fits that did not determine the state."""
+        return self.startup.fit_failures
+
     @property
     def history(self) -> History:
         """The inputs of the last ``history_length`` s (:class:`gpf_nav.estimator.history.History`)."""
