@@ -268,8 +268,8 @@ def test_engine_imu_zero_order_hold_uses_samples_before_the_stamp():
     eng, _ = _engine(s)
     eng.imu(_stamp(s, 0) - S // 2, np.array([0.1, 0.0, 0.0]), None)
     eng.imu(_stamp(s, 0), np.array([9.0, 9.0, 9.0]), None)   # at the stamp itself: not for this interval
-    assert np.allclose(eng._input_at(_stamp(s, 0)), [0.1, 0.0, 0.0])
-    assert eng._input_at(_stamp(s, 0) + 5 * S) is None           # older than imu_timeout
+    assert np.allclose(eng.imu_hold.input_at(_stamp(s, 0)), [0.1, 0.0, 0.0])
+    assert eng.imu_hold.input_at(_stamp(s, 0) + 5 * S) is None           # older than imu_timeout
     assert eng.imu(_stamp(s, 0) - S, np.zeros(3), None) == (False, "stale_stamp")
 
 

@@ -1,176 +1,49 @@
-"""The estimator's logic without ROS: timing, initialisation, IMU input, recovery, counters.
+"""The estimator's logic without ROS: :class:`EstimatorEngine` runs one core filter on stamped inputs.
 
-:class:`EstimatorEngine` is what ``estimator_node`` drives; the node only converts messages, applies
-the message-level checks of :mod:`gpf_nav.estimator.input_checks` and publishes. Times are integer nanoseconds
-of ROS time. Rules:
+``estimator_node`` drives it; the node only converts messages, applies the message-level checks of
+:mod:`gpf_nav.estimator.input_checks` and publishes. Times are integer nanoseconds of ROS time. A
+measurement at stamp ``t`` runs ``predict((t - t_filter) s, u)`` then ``update(y, sensor)``, ``u`` the IMU
+input held at ``t`` and ``sensor`` None the model's own measurement (rae, range). Stamps more than
+``max_future`` s ahead of the node clock are refused (``future_stamp``), and so are measurements above
+``max_measurement_rate`` (``rate_limit``). The engine is the flow of an input through its roles, each a
+module with its rules:
 
-* A measurement at stamp ``t`` runs ``predict((t - t_filter) s, u)`` then ``update(y, sensor)``, ``u`` being
-  the world-frame specific force of the latest IMU message stamped strictly before ``t`` (zero-order hold;
-  none when there is no such sample within ``imu_timeout`` s before ``t``); ``sensor`` None is the model's
-  own measurement (rae, range). A stream with a gate (``gates``) is first tested on the predicted estimate
-  (:func:`gpf_nav.sensors.innovation_distance`, chi-square; with the sensor's estimated bias and its
-  sigma when it has bias states): refused as ``innovation_gate`` (the filter
-  stays predicted to ``t``) unless ``gate_limit`` were refused in a row.
-* A measurement stamped before the filter's time, by at most ``history_length`` s, is fused at its own
-  stamp: the filter is restored from the last snapshot taken before it (see
-  :mod:`gpf_nav.estimator.history`), the inputs between are re-applied, it is updated with the late
-  input, and the later inputs are re-applied; the result equals in-order delivery bit for bit. Older stamps are refused (``older_than_history``), and so are
-  stamps within it but before the filter's (re-)initialisation (``stale_stamp``); more than ``max_future`` s ahead of the
-  node clock too (``future_stamp``). With ``history_length`` 0 every stamp before the filter's time is
-  ``stale_stamp``. Re-application is paid from a budget in seconds of stamps
-  (:class:`gpf_nav.estimator.input_checks.ReapplyBudget`: ``reapply_budget`` s per second of the filter's time,
-  at most ``history_length`` s saved up): a late measurement whose lateness exceeds what is left is refused
-  (``reapply_budget``), so a stream of late data cannot take more than that share of the work.
-* An IMU sample delivered after a measurement stamped after it (the topics arrive in any order) that
-  should have been that measurement's input re-applies the history from there in the same way
-  (``late_imu_count``), so the estimate does not depend on the order of the two topics. The
-  re-application waits until the IMU has caught up with the filter's time (a sample stamped at or after
-  it) or the next measurement, whichever comes first, and runs once from the earliest such sample: an IMU
-  stream lagging by many samples (a backlog after a stall) costs one re-application, not one per sample,
-  which would keep the node too busy to catch up. Predictions between measurements (:meth:`extrapolate`)
-  meanwhile hold the inputs known so far.
-* Initialisation, first match wins: the ``initial_state`` parameter (at ``initial_stamp``, or at the
-  first measurement when that is negative); a ``set_state`` (full state) or ``set_pose`` (position)
-  message; else the first ``init_window`` measurements through
-  :func:`gpf_nav.estimator.initialization.batch_initial_state`. A ``set_state`` or ``set_pose`` that comes
-  while measurements are buffered for that fit (say the latched prior, delivered just after the first
-  live measurement) is not stale: the filter starts from it and then takes the buffered measurements
-  stamped at or after it.
-* Predictions between measurements (:meth:`extrapolate`) run on a copy of the filter, so they never
-  move the filter's own time: a measurement that arrives late (but newer than the last one) is used.
-* If the filter raises or its mean/covariance become non-finite, it is rebuilt from the last good
-  estimate (covariance inflated), predicted to the failing stamp, and the event is counted
-  (``reinit_count``; diagnostics go to ERROR for ``reinit_hold`` s). A re-initialisation the core
-  filter does by itself (its ``recoveries`` counter: all particles non-finite or weightless, ESS
-  collapse with ``collapse_steps``) is counted and reported the same way.
-* After ``fault_updates`` updates in a row at which the co-state integrity monitor is at FAULT the filter
-  is re-initialised by ``fault_action``: ``"measurements"`` starts it again from the next ``init_window``
-  measurements (the batch fit, even with an ``initial_state``), ``"prior"`` from the last initial state
-  (parameters, ``set_state``, ``set_pose`` or batch fit) predicted to the filter's time; ``"none"`` leaves it
-  (the FAULT is only reported). Counted in ``fault_reinit_count`` and ``reinit_count``.
+* :mod:`~gpf_nav.estimator.startup`: what the filter is (re-)initialised from;
+* :mod:`~gpf_nav.estimator.measurements`: the innovation gate, and late measurements fused at their stamp;
+* :mod:`~gpf_nav.estimator.imu_hold`: the IMU input, and IMU samples that come late;
+* :mod:`~gpf_nav.estimator.integrity_watch` and :mod:`~gpf_nav.estimator.consistency_watch`: the monitors
+  fed at each update, and what a persistent integrity FAULT leads to;
+* :mod:`~gpf_nav.estimator.extrapolation`: the estimate published between measurements.
+
+If the filter raises or its mean/covariance become non-finite, it is rebuilt from the last good estimate
+(covariance inflated by ``reinit_inflation``), predicted to the failing stamp, and the event is counted
+(``reinit_count``; diagnostics go to ERROR for ``reinit_hold`` s). A re-initialisation the core filter does
+by itself (its ``recoveries`` counter: all particles non-finite or weightless, ESS collapse with
+``collapse_steps``) is counted and reported the same way, and so is one after a persistent integrity FAULT
+(also in ``fault_reinit_count``).
 """
 from __future__ import annotations
 
-import copy
 import time
-from collections import deque
-from dataclasses import dataclass, field
-from functools import lru_cache
+from operator import attrgetter
 from typing import Callable
 
 import numpy as np
 
-from scipy.stats import chi2
-
-from gpf_nav.filters import SensorBiasFilter
-from gpf_nav.filters.interface import COMPENSATION, COSTATE, GATE, MODEL_PROBABILITIES, RESAMPLING, TEMPERING
-from gpf_nav.integrity import ConsistencyMonitor, ConsistencyStatus, CostateMonitor, IntegrityStatus, innovation_moments
-from gpf_nav.estimator.history import Entry, History
-from gpf_nav.estimator.initialization import batch_initial_state
-from gpf_nav.sensors import ModelSensor, innovation_distance
-from gpf_nav.estimator.input_checks import Counters, RateLimiter, ReapplyBudget, check_timing
-
-NS = 1_000_000_000
-LATE_IMU_MEMORY = 50
-"""Inputs after a late IMU sample during which the newest input keeps a snapshot too
-(:mod:`gpf_nav.estimator.history`): a measurement whose IMU sample comes after it then re-applies one input,
-not up to ``SNAPSHOT_EVERY`` of them, for a copy of the filter per input (a sixth of an update)."""
-IMU_SAMPLES = 4096
-"""IMU samples kept (the zero-order hold looks them up, also when re-applying the history)."""
-LEVEL_RANK = {"OK": 0, "WARN": 1, "FAULT": 2}
-FAULT_ACTIONS = ("none", "measurements", "prior")
-"""What a persistent integrity FAULT leads to (``EngineConfig.fault_action``)."""
-PRIOR_SOURCES = ("parameters", "set_state", "set_pose", "measurements")
-"""Initialisations kept as the prior a ``fault_action: prior`` starts again from."""
-
-
-@dataclass
-class EngineConfig:
-    """Engine settings (node parameters; units in the field comments)."""
-
-    max_future: float = 1.0                 # s, refuse stamps further ahead of the node clock
-    imu_timeout: float = 1.0                # s, an IMU sample older than this is not used
-    init_window: int = 10                   # measurements buffered for the batch initialisation
-    initial_state: np.ndarray | None = None  # (n,) m, m/s; None: not given
-    initial_std: np.ndarray = field(default_factory=lambda: np.array([1e3, 1e3, 1e3, 1.0, 1.0, 1.0]))
-    initial_stamp: float = -1.0             # s of ROS time; < 0: the first measurement's stamp
-    max_measurement_rate: float = 0.0       # messages per second (steady clock); <= 0: unlimited
-    max_extrapolation: float = 300.0        # s, predictions are not published further than this
-    reinit_inflation: float = 4.0           # covariance factor when re-initialising after a failure
-    reinit_hold: float = 10.0               # s (steady clock) the ERROR level is held after it
-    monitor: dict | None = field(default_factory=dict)  # CostateMonitor keyword arguments; None: disabled
-    monitor_hold: float = 5.0               # s (steady clock) a monitor WARN/FAULT stays reported; < 0: until reset
-    consistency: dict | None = field(default_factory=dict)  # ConsistencyMonitor keyword arguments; None: disabled
-    history_length: float = 10.0            # s, late measurements within this are fused at their stamp; 0: none
-    reapply_budget: float = 0.5             # s of lateness re-applied per s of filter time (ReapplyBudget); 0: unlimited
-    gates: dict = field(default_factory=dict)  # stream -> chi-square probability of its innovation gate; 0: off
-    gate_limit: int = 5                     # after this many gate refusals in a row the next one is used
-    fault_action: str = "none"              # one of FAULT_ACTIONS: re-initialise after a persistent FAULT
-    fault_updates: int = 30                 # integrity FAULT updates in a row that make it persistent
-
-
-@dataclass(frozen=True)
-class IntegrityReport:
-    """What :meth:`EstimatorEngine.integrity` says about the co-state monitor.
-
-    Attributes:
-        state: ``"active"``, ``"disabled"`` (``monitor_enabled: false``) or ``"unavailable"`` (the
-            filter has no co-state: EKF, UKF, EnKF, SPF without ``compute_costate``).
-        level: the level reported: worst of the last update's and of the held alarms (``"OK"``,
-            ``"WARN"``, ``"FAULT"``); ``"OK"`` unless active.
-        status: the monitor's last :class:`IntegrityStatus` (None unless active).
-        alarm: the status of the alarm behind ``level`` when it is held (None when ``level`` is the
-            last update's own), and ``alarm_age`` its age [s, steady clock].
-        samples, rejected, skipped, quarantined: monitor samples since its last reset; samples it
-            ignored (non-finite); updates not fed (``dt = 0``); samples kept out of its reference.
-        fault_updates, warn_updates: updates at FAULT / at WARN since start-up (cumulative).
-        resets: monitor resets since start-up.
-        error: the last exception the monitor raised ("" if none; the monitor is then reset).
-    """
-
-    state: str
-    level: str = "OK"
-    status: IntegrityStatus | None = None
-    alarm: IntegrityStatus | None = None
-    alarm_age: float = 0.0
-    samples: int = 0
-    rejected: int = 0
-    skipped: int = 0
-    quarantined: int = 0
-    fault_updates: int = 0
-    warn_updates: int = 0
-    resets: int = 0
-    error: str = ""
-
-
-@dataclass(frozen=True)
-class ConsistencyReport:
-    """What :meth:`EstimatorEngine.consistency_report` says about the consistency monitor
-    (:mod:`gpf_nav.integrity.consistency`).
-
-    Attributes:
-        level: ``"OK"``, ``"WARN"`` or ``"FAULT"``: the last update's, or ``"FAULT"`` while an alarm is held
-            (``monitor_hold``).
-        status: the monitor's last :class:`ConsistencyStatus`.
-        alarm: the held FAULT's status (None when ``level`` is the last update's) and ``alarm_age`` [s].
-        updates, rejected: updates tested and updates that could not be (since the last reset).
-        fault_updates: updates at FAULT since start-up (cumulative).
-        error: the last exception the monitor raised ("" if none; the monitor is then reset).
-    """
-
-    level: str
-    status: ConsistencyStatus
-    alarm: ConsistencyStatus | None
-    alarm_age: float
-    updates: int
-    rejected: int
-    fault_updates: int
-    error: str
-
-
-@lru_cache(maxsize=64)
-def _chi2_threshold(probability: float, dof: int) -> float:
-    return float(chi2.ppf(probability, dof))
+from gpf_nav.estimator.consistency_watch import ConsistencyReport, ConsistencyWatch
+from gpf_nav.estimator.engine_config import NS, EngineConfig
+from gpf_nav.estimator.extrapolation import Extrapolation
+from gpf_nav.estimator.filter_figures import filter_stats, observability
+from gpf_nav.estimator.history import Entry
+from gpf_nav.estimator.imu_hold import ImuHold
+from gpf_nav.estimator.input_checks import Counters, RateLimiter, check_timing
+from gpf_nav.estimator.integrity_watch import IntegrityReport, IntegrityWatch
+from gpf_nav.estimator.measurements import InnovationGate, LateFusion
+from gpf_nav.estimator.startup import StartUp
+from gpf_nav.filters.interface import COSTATE, Filter
+from gpf_nav.integrity import ObservabilityReport
+from gpf_nav.models.state_space import StateSpaceModel
+from gpf_nav.sensors import Sensor
 
 
 class EstimatorEngine:
@@ -180,10 +53,18 @@ class EstimatorEngine:
         factory: builds a fresh, uninitialised filter (called at start, on reset and on recovery).
         model: the filter's model (``state_dim``, ``position_index``, ...).
         config: :class:`EngineConfig`.
-        monotonic: steady clock [s] used by the rate limiter and the ERROR hold.
+        monotonic: steady clock [s] used by the rate limiter, the ERROR hold and the monitors' alarm holds.
+
+    Attributes:
+        filter: the core filter; ``t_ns`` its time (None: not initialised), ``mean`` ``(n,)`` and ``cov``
+            ``(n, n)`` its last finite estimate, ``version`` bumped at every change of it.
+        counters: accepted and refused inputs (:class:`Counters`; cumulative, like ``reinit_count``,
+            ``fault_reinit_count`` and the monitors' counts).
+        last_measurement_ns, last_update_ns: stamps of the newest accepted measurement and of the last
+            update.
     """
 
-    def __init__(self, factory: Callable[[], object], model, config: EngineConfig,
+    def __init__(self, factory: Callable[[], Filter], model: StateSpaceModel, config: EngineConfig,
                  monotonic: Callable[[], float] = time.monotonic):
         self.factory = factory
         self.model = model
@@ -193,95 +74,160 @@ class EstimatorEngine:
         self.reinit_count = 0
         self.last_reinit_reason = ""
         self._last_reinit_time = -np.inf
+        self.fault_reinit_count = 0
         self._rate = RateLimiter(config.max_measurement_rate)
-        self.monitor = CostateMonitor(**config.monitor) if config.monitor is not None else None
-        self.integrity_fault_updates = 0      # cumulative, like the counters
-        self.integrity_warn_updates = 0
-        self.integrity_resets = 0
-        self._skipped = 0                     # updates the integrity monitor skipped since its reset
-        self.integrity_error = ""
-        self.consistency = ConsistencyMonitor(**config.consistency) if config.consistency is not None else None
-        self.consistency_fault_updates = 0    # cumulative
-        self.consistency_error = ""
-        self.fault_reinit_count = 0           # re-initialisations after a persistent FAULT (cumulative)
-        self._prior: tuple[np.ndarray, np.ndarray, int] | None = None  # the last initial state (PRIOR_SOURCES)
-        self._model_sensor = ModelSensor(model)
+        self.startup = StartUp(config, model)
+        self.gate = InnovationGate(config)
+        self.fusion = LateFusion(config, step=self._step, restore=self._restore)
+        self.imu_hold = ImuHold(config)
+        self.integrity_watch = IntegrityWatch(config, self._now)
+        self.consistency_watch = ConsistencyWatch(config, model, self._now)
+        self.extrapolation = Extrapolation(config)
         self.reset()
 
-    # --- state -----------------------------------------------------------------------------------------
     def reset(self, from_data: bool = False) -> None:
         """Back to the start-up state (counters are kept; they are cumulative); ``from_data``: initialise
         from the next measurements (the batch fit) even when an ``initial_state`` is configured."""
-        self._from_data = from_data
-        if not from_data:
-            self._prior = None
+        self.startup.reset(from_data)
         self.filter = self.factory()
         self._core_recoveries = 0
-        self.t_ns: int | None = None          # ROS time of the filter state
+        self.t_ns: int | None = None
         self.last_measurement_ns: int | None = None
         self.last_update_ns: int | None = None
         self.mean: np.ndarray | None = None
         self.cov: np.ndarray | None = None
-        self.version = 0                      # bumps at every change of the filter state
-        self._good: tuple[np.ndarray, np.ndarray, int] | None = None
-        self._imu: deque[tuple[int, np.ndarray]] = deque(maxlen=IMU_SAMPLES)
-        self.history = History(int(round(self.config.history_length * NS)))
-        self._budget = ReapplyBudget(self.config.reapply_budget, self.config.history_length, 0)
-        self._streaks: dict[str, int] = {}   # gate refusals in a row per stream
-        self.late_count = 0                   # late measurements fused at their stamp
-        self.late_imu_count = 0               # IMU samples that came after a measurement that needed them
-        self._late_imu_ns: int | None = None  # the earliest of them not yet re-applied
-        self._late_imu_recent = 0             # inputs to come that keep an extra snapshot (LATE_IMU_MEMORY)
-        self.replayed_count = 0               # inputs re-applied after them
-        self.snapshot_failures = 0            # filter copies that failed (the history was emptied)
-        self._init_buffer: list[tuple[int, np.ndarray]] = []
-        self.init_failures = 0                # batch fits that did not determine the state
-        self._shadow = None
-        self._shadow_version = -1
-        self._shadow_ns = None
-        self.init_source = ""
-        self._last_dt = 0.0
-        self._reset_monitor()
-        self._consistency_alarm: tuple[float, ConsistencyStatus] | None = None
-        cfg = self.config
-        if not self._fits_data and cfg.initial_stamp >= 0.0:
-            self._initialize(cfg.initial_state, np.diag(cfg.initial_std ** 2),
-                             int(round(cfg.initial_stamp * 1e9)), "parameters")
+        self.version = 0
+        self._good: tuple[np.ndarray, np.ndarray, int] | None = None  # the last finite estimate and its stamp
+        self.imu_hold.reset()
+        self.fusion.reset()
+        self.gate.streaks = {}
+        self.extrapolation.drop()
+        self._reset_monitors()
+        self.consistency_watch.drop_alarm()
+        t0_ns = self.startup.parameters_stamp_ns()
+        if t0_ns is not None:
+            self._start(*self.startup.parameters(), t0_ns, "parameters")
 
-    @property
-    def _fits_data(self) -> bool:
-        """Whether the next initialisation is the batch fit of measurements (rather than ``initial_state``)."""
-        return self.config.initial_state is None or self._from_data
+    # --- inputs ----------------------------------------------------------------------------------------
+    def measurement(self, stamp_ns: int, y: np.ndarray, now_ns: int | None,
+                    stream: str = "rae", sensor: Sensor | None = None) -> tuple[bool, str]:
+        """Use measurement ``y`` ``(m,)`` (NaN = not measured) taken at ``stamp_ns`` by ``sensor`` (None: the
+        model's own measurement).
 
-    @property
-    def initialized(self) -> bool:
-        return self.t_ns is not None
+        Returns ``(True, "")`` when the filter was updated (``mean``/``cov`` are then at the filter's
+        time: ``stamp_ns``, or later for a late measurement), ``(True, "buffered")`` when it was kept
+        for the initialisation, else ``(False, reason)``; the counters are updated either way.
+        """
+        self._apply_late_imu()
+        last = None if self.initialized else self.last_measurement_ns
+        ok, reason = check_timing(stamp_ns, last, now_ns, self._max_future_ns)
+        late = ok and self.initialized and stamp_ns < self.t_ns
+        if late:
+            reason = self.fusion.refusal(self.t_ns, stamp_ns)
+            ok = not reason
+        if ok and not self._rate.allow(self.monotonic()):
+            ok, reason = False, "rate_limit"
+        if ok and late and not self.fusion.afford(self.t_ns, stamp_ns):
+            ok, reason = False, "reapply_budget"
+        if ok and not self.initialized and sensor is not None and self.startup.fits_data:
+            ok, reason = False, "not_initialized"  # only the model's own measurements initialise
+        if not ok:
+            self.counters.reject(stream, reason)
+            return False, reason
+        y = np.asarray(y, dtype=float)
+        self.counters.masked += int(np.sum(~np.isfinite(y)))
+        self.last_measurement_ns = max(stamp_ns, self.last_measurement_ns or 0)
+        if not self.initialized:
+            if self.startup.fits_data:
+                return self._buffer(stamp_ns, y, stream)
+            self._start(*self.startup.parameters(), stamp_ns, "parameters")
+        reason = self.fusion.fuse(stamp_ns, y, stream, sensor) if late else self._step(stamp_ns, y, stream, sensor)
+        if reason:
+            self.counters.reject(stream, reason)
+            return False, reason
+        self.counters.accept(stream)
+        if self.integrity_watch.persistent_fault:
+            self._act_on_fault()
+        return True, ""
 
-    @property
-    def in_error(self) -> bool:
-        """True for ``reinit_hold`` s after a re-initialisation."""
-        return self.monotonic() - self._last_reinit_time < self.config.reinit_hold
+    def imu(self, stamp_ns: int, specific_force_world: np.ndarray, now_ns: int | None) -> tuple[bool, str]:
+        """Hold a world-frame specific force ``(3,)`` [m/s^2] from ``stamp_ns`` on."""
+        ok, reason = check_timing(stamp_ns, self.imu_hold.newest_ns, now_ns, self._max_future_ns)
+        if not ok:
+            self.counters.reject("imu", reason)
+            return False, reason
+        u = np.asarray(specific_force_world, dtype=float).copy()
+        self.imu_hold.hold(stamp_ns, u)
+        self.counters.accept("imu")
+        if self.initialized and stamp_ns < self.t_ns:
+            self.imu_hold.note_late(stamp_ns, u, self.fusion.history)
+        else:
+            self._apply_late_imu()  # caught up with the filter's time
+        return True, ""
 
-    def _initialize(self, mean, cov, t_ns: int, source: str) -> None:
-        fresh = self.factory()
-        # the filter's time is the stamps' (s), the scale of moon_epoch: a station on the rotating
-        # Moon and a field with tesseral terms turn with it
-        fresh.initialize(mean, cov, t_ns * 1e-9)  # may raise: then nothing has changed
-        self.filter = fresh
-        self._core_recoveries = self.filter.recoveries
-        self.t_ns = int(t_ns)
-        self._init_ns = int(t_ns)
-        self.init_source = source
-        if source in PRIOR_SOURCES:
-            self._prior = (np.array(mean, dtype=float), np.array(cov, dtype=float), int(t_ns))
-        self._from_data = False
-        self._init_buffer = []
-        self.history.clear()
-        self._budget = ReapplyBudget(self.config.reapply_budget, self.config.history_length, t_ns)
-        self._late_imu_ns = None
-        self._streaks = {}
-        self._reset_monitor()
-        self._store(t_ns)
+    def set_state(self, stamp_ns: int, mean: np.ndarray, cov: np.ndarray, now_ns: int | None) -> tuple[bool, str]:
+        """(Re-)initialise at ``stamp_ns`` with a full state ``mean`` ``(n,)`` and covariance ``cov``
+        ``(n, n)``: a state handed over (the simulator's prior; a vehicle's pre-descent state)."""
+        ok, reason = self._check_reinit_timing("set_state", stamp_ns, now_ns)
+        return self._reinitialize("set_state", stamp_ns, mean, cov) if ok else (ok, reason)
+
+    def set_pose(self, stamp_ns: int, position: np.ndarray, position_cov: np.ndarray | None,
+                 now_ns: int | None) -> tuple[bool, str]:
+        """(Re-)initialise at ``stamp_ns`` with the given position ``(p,)``; velocity from the current
+        estimate, else from the ``initial_state`` parameter. ``position_cov`` ``(p, p)`` None: ``initial_std``'s."""
+        ok, reason = self._check_reinit_timing("set_pose", stamp_ns, now_ns)
+        if not ok:
+            return False, reason
+        estimate = None
+        if self.initialized and self.mean is not None:
+            estimate = self.extrapolate(stamp_ns, force=True) if stamp_ns >= self.t_ns else None
+            estimate = estimate if estimate is not None else (self.mean, self.cov)
+        state = self.startup.pose(position, position_cov, estimate)
+        if state is None:
+            self.counters.reject("set_pose", "no_velocity")
+            return False, "no_velocity"
+        return self._reinitialize("set_pose", stamp_ns, *state)
+
+    # --- the flow of an input --------------------------------------------------------------------------
+    def _step(self, stamp_ns: int, y: np.ndarray, stream: str = "rae", sensor: Sensor | None = None,
+              feed_monitors: bool = True) -> str:
+        """Predict to ``stamp_ns`` and update with ``y`` ``(m,)``, keeping the input in the history: ``""``
+        when updated, ``"innovation_gate"`` when the gate refused it (predicted only), ``"filter_error"``
+        after a recovery. ``feed_monitors`` False: a re-applied input."""
+        entry = self.fusion.entry(self.filter, self.t_ns, stamp_ns, stream, y, sensor, self.gate.streaks,
+                                  self.imu_hold.extra_snapshot_due())
+        try:
+            dt = self._predict_to(stamp_ns)
+            gated = self.gate.refuses(self.filter, stream, sensor, y)
+            if not gated:
+                if feed_monitors:
+                    self.consistency_watch.test(self.filter, y, sensor)
+                if sensor is None:
+                    self.filter.update(y)
+                else:
+                    self.filter.update(y, sensor)
+        except Exception as err:  # noqa: BLE001 - any filter failure means: recover, never crash the node
+            self._recover(stamp_ns, f"filter raised {type(err).__name__}: {err}")
+            return "filter_error"
+        if not self._store(stamp_ns):
+            self._recover(stamp_ns, "non-finite mean or covariance after the update")
+            return "filter_error"
+        self.fusion.keep(entry)
+        if gated:
+            return "innovation_gate"
+        if not self._check_core_recovery() and feed_monitors and sensor is None:
+            if not self.integrity_watch.feed(self.filter, dt):
+                self._reset_monitors()
+        self.last_update_ns = stamp_ns
+        return ""
+
+    def _predict_to(self, stamp_ns: int) -> float:
+        """Predict the filter to ``stamp_ns`` with the IMU input held then; returns the step [s]."""
+        dt = (stamp_ns - self.t_ns) * 1e-9
+        if dt > 0.0:
+            self.filter.predict(dt, self.imu_hold.input_at(stamp_ns))
+        self.t_ns = stamp_ns
+        return dt
 
     def _store(self, t_ns: int) -> bool:
         """Cache mean/covariance at ``t_ns``; False (and nothing stored) when they are not finite."""
@@ -294,538 +240,200 @@ class EstimatorEngine:
         self.version += 1
         return True
 
-    # --- inputs ----------------------------------------------------------------------------------------
-    def measurement(self, stamp_ns: int, y: np.ndarray, now_ns: int | None,
-                    stream: str = "rae", sensor=None) -> tuple[bool, str]:
-        """Use measurement ``y`` ``(m,)`` (NaN = not measured) taken at ``stamp_ns`` by ``sensor`` (a
-        :class:`gpf_nav.sensors.Sensor`; None: the model's own measurement).
-
-        Returns ``(True, "")`` when the filter was updated (``mean``/``cov`` are then at the filter's
-        time: ``stamp_ns``, or later for a late measurement), ``(True, "buffered")`` when it was kept
-        for the initialisation, else ``(False, reason)``; the counters are updated either way.
-        """
-        self._apply_late_imu()
-        last = None if self.initialized else self.last_measurement_ns
-        ok, reason = check_timing(stamp_ns, last, now_ns, int(self.config.max_future * NS))
-        late = ok and self.initialized and stamp_ns < self.t_ns
-        if late:
-            ok, reason = self._late_allowed(stamp_ns)
-        if ok and not self._rate.allow(self.monotonic()):
-            ok, reason = False, "rate_limit"
-        if ok and late and not self._budget.spend(self.t_ns, (self.t_ns - stamp_ns) * 1e-9):
-            ok, reason = False, "reapply_budget"
-        if ok and not self.initialized and sensor is not None and self._fits_data:
-            ok, reason = False, "not_initialized"  # only the model's own measurements initialise
-        if not ok:
-            self.counters.reject(stream, reason)
-            return False, reason
-        y = np.asarray(y, dtype=float)
-        self.counters.masked += int(np.sum(~np.isfinite(y)))
-        self.last_measurement_ns = max(stamp_ns, self.last_measurement_ns or 0)
-        if not self.initialized:
-            if not self._fits_data:
-                self._initialize(self.config.initial_state, np.diag(self.config.initial_std ** 2),
-                                 stamp_ns, "parameters")
-            else:
-                return self._buffer(stamp_ns, y, stream)
-        reason = self._late(stamp_ns, y, stream, sensor) if late else self._update(stamp_ns, y, stream, sensor)
-        if reason:
-            self.counters.reject(stream, reason)
-            return False, reason
-        self.counters.accept(stream)
-        if self.config.fault_action != "none" and self._fault_streak >= self.config.fault_updates:
-            self._act_on_fault()
-        return True, ""
-
-    def _act_on_fault(self) -> None:
-        """Re-initialise after ``fault_updates`` integrity FAULT updates in a row (``fault_action``)."""
-        why = f"integrity FAULT for {self._fault_streak} updates in a row"
-        self.fault_reinit_count += 1
-        self.reinit_count += 1
-        self._last_reinit_time = self.monotonic()
-        self._shadow = None
-        t_ns = self.t_ns
-        if self.config.fault_action == "prior" and self._prior is not None:
-            mean, cov, t0 = self._prior
-            try:
-                self._initialize(mean, cov, t0, "prior")
-                self._predict_to(t_ns)
-                if self._store(t_ns):
-                    self._init_ns = t_ns  # the stamps before it belong to the state given up
-                    self.last_reinit_reason = f"{why}: re-initialised from the last prior"
-                    return
-            except Exception:  # noqa: BLE001 - a prior that cannot be predicted: start from the data
-                pass
-        last = self.last_measurement_ns
-        self.reset(from_data=True)
-        self.last_measurement_ns = last  # the fit takes only measurements after the ones given up
-        self.last_reinit_reason = f"{why}: re-initialising from the next measurements"
-
-    def _late_allowed(self, stamp_ns: int) -> tuple[bool, str]:
-        """Whether a measurement stamped before the filter's time can be fused at its stamp."""
-        if self.config.history_length <= 0.0:
-            return False, "stale_stamp"
-        if (self.t_ns - stamp_ns) * 1e-9 > self.config.history_length:
-            return False, "older_than_history"
-        if stamp_ns < self._init_ns:
-            return False, "stale_stamp"
-        if self.history.split(stamp_ns) is None:
-            return False, "older_than_history"
-        return True, ""
-
-    def _late(self, stamp_ns: int, y: np.ndarray, stream: str, sensor) -> str:
-        """Fuse a measurement stamped before the filter's time at its stamp: restore the last snapshot
-        before it, re-apply the inputs between, then the late one, then the inputs stamped after it
-        (their counters are not counted again; the monitor is not fed again)."""
-        i, j = self.history.split(stamp_ns)
-        redo = self._rewind(j)
-        for entry in redo[:i - j]:
-            self._update(entry.t_ns, entry.y, entry.stream, entry.sensor, feed_monitor=False)
-        reason = self._update(stamp_ns, y, stream, sensor)
-        for entry in redo[i - j:]:
-            self._update(entry.t_ns, entry.y, entry.stream, entry.sensor, feed_monitor=False)
-        self.late_count += 1
-        self.replayed_count += len(redo)
-        return reason
-
-    def _update(self, stamp_ns: int, y: np.ndarray, stream: str = "rae", sensor=None,
-                feed_monitor: bool = True) -> str:
-        """Predict to ``stamp_ns`` and update with ``y``: ``""`` when updated, ``"innovation_gate"`` when
-        the gate refused it (predicted only), ``"filter_error"`` after a recovery."""
-        keep = self.history.length_ns > 0
-        periodic = self.history.wants_snapshot()
-        extra = not periodic and self._late_imu_recent > 0  # the newest input's, while IMU samples come late
-        self._late_imu_recent = max(0, self._late_imu_recent - 1)
-        before = self._snapshot() if keep and (periodic or extra) else None
-        keep = keep and (before is not None or len(self.history) > 0)  # (a failed copy emptied the history)
-        entry = Entry(stamp_ns, stream, y, sensor, before, self.t_ns, dict(self._streaks),
-                      extra=extra and before is not None)
-        try:
-            self._predict_to(stamp_ns)
-            gated = self._gated(stream, sensor, y)
-            if not gated:
-                if feed_monitor:
-                    self._test_consistency(y, sensor)
-                if sensor is None:
-                    self.filter.update(y)
-                else:
-                    self.filter.update(y, sensor)
-        except Exception as err:  # noqa: BLE001 - any filter failure means: recover, never crash the node
-            self._recover(stamp_ns, f"filter raised {type(err).__name__}: {err}")
-            return "filter_error"
-        if not self._store(stamp_ns):
-            self._recover(stamp_ns, "non-finite mean or covariance after the update")
-            return "filter_error"
-        if keep:
-            self.history.append(entry)
-        if gated:
-            return "innovation_gate"
-        if not self._check_core_recovery() and feed_monitor and sensor is None:
-            self._feed_monitor()
-        self.last_update_ns = stamp_ns
-        return ""
-
-    def _snapshot(self):
-        """A deep copy of the filter for the history. A filter that cannot be copied empties the history
-        (None): late stamps before this input are then ``older_than_history``."""
-        try:
-            return copy.deepcopy(self.filter)
-        except Exception:  # noqa: BLE001 - e.g. a user's filter wrapper: go on without late fusion
-            self.history.clear()
-            self.snapshot_failures += 1
-            return None
-
-    def _gated(self, stream: str, sensor, y: np.ndarray) -> bool:
-        """The innovation gate of ``stream`` (a sensor object's streams only) on the predicted estimate;
-        True refuses ``y``. Counts the refusals in a row; after ``gate_limit`` the next one passes."""
-        probability = self.config.gates.get(stream, 0.0)
-        if sensor is None or probability <= 0.0:
-            return False
-        if isinstance(self.filter, SensorBiasFilter):  # the sensor's estimated bias is part of its prediction
-            sensor, mean, cov = self.filter.predicted_estimate(sensor)
-        else:
-            mean, cov = self.filter.mean, self.filter.covariance
-        d2, k = innovation_distance(sensor, y, mean, cov, self.filter.time)
-        if k == 0 or d2 <= _chi2_threshold(probability, k):
-            self._streaks[stream] = 0
-            return False
-        streak = self._streaks.get(stream, 0)
-        if streak >= self.config.gate_limit:
-            self._streaks[stream] = 0
-            return False
-        self._streaks[stream] = streak + 1
-        return True
-
-    def _check_core_recovery(self) -> bool:
-        """Count a re-initialisation the core filter did by itself (and reset the monitor); True if so."""
-        recoveries = self.filter.recoveries
-        recovered = recoveries > self._core_recoveries
-        if recovered:
-            self.reinit_count += recoveries - self._core_recoveries
-            self.last_reinit_reason = f"core filter recovery: {self.filter.last_recovery_reason}"
-            self._last_reinit_time = self.monotonic()
-            self._reset_monitor()
-        self._core_recoveries = recoveries
-        return recovered
-
-    def _buffer(self, stamp_ns: int, y: np.ndarray, stream: str) -> tuple[bool, str]:
-        self._init_buffer.append((stamp_ns, y))
-        self.counters.accept(stream)
-        window = max(2, int(self.config.init_window))
-        if len(self._init_buffer) < window:
-            return True, "buffered"
-        times = np.array([t for t, _ in self._init_buffer], dtype=np.int64)
-        ys = np.array([v for _, v in self._init_buffer])
-        seconds = (times - times[0]) * 1e-9
-        fit = None
-        if seconds[-1] > 0.0:
-            try:
-                fit = batch_initial_state(self.model, seconds, ys)
-            except Exception:  # noqa: BLE001 - a failed fit just waits for more data
-                fit = None
-        if fit is None:
-            self.init_failures += 1
-            self._init_buffer = self._init_buffer[-(window - 1):]  # slide the window
-            return True, "buffered"
-        self._initialize(fit[0], fit[1], stamp_ns, "measurements")
-        self.last_update_ns = stamp_ns
-        return True, ""
-
-    def waiting_for(self) -> str:
-        """What the uninitialised engine waits for, in words (for the node's periodic warning)."""
-        buffered, window = len(self._init_buffer), max(2, int(self.config.init_window))
-        text = f"waiting for set_state, set_pose or measurements ({buffered}/{window} buffered)"
-        if self.init_failures:
-            text += (f"; the batch fit failed {self.init_failures} times: it needs at least two "
-                     "measurements with range, azimuth and elevation (set initial_state or send set_pose)")
-        return text
-
-    def imu(self, stamp_ns: int, specific_force_world: np.ndarray, now_ns: int | None) -> tuple[bool, str]:
-        """Hold a world-frame specific force ``(3,)`` [m/s^2] from ``stamp_ns`` on."""
-        last = self._imu[-1][0] if self._imu else None
-        ok, reason = check_timing(stamp_ns, last, now_ns, int(self.config.max_future * NS))
-        if not ok:
-            self.counters.reject("imu", reason)
-            return False, reason
-        u = np.asarray(specific_force_world, dtype=float).copy()
-        self._imu.append((stamp_ns, u))
-        self.counters.accept("imu")
-        if self.initialized and stamp_ns < self.t_ns:
-            self._late_imu(stamp_ns, u)
-        else:
-            self._apply_late_imu()  # caught up with the filter's time
-        return True, ""
-
-    def _late_imu(self, stamp_ns: int, u: np.ndarray) -> None:
-        """An IMU sample that arrives after a measurement stamped after it (another topic, delivered
-        first): when it is the input that measurement's prediction should have held, the history is to be
-        re-applied from it, as for a late measurement, so the estimate is that of delivery in stamp order
-        (:meth:`_apply_late_imu`, deferred). Beyond the history, or too old to be that input
-        (``imu_timeout``), nothing changes. (An earlier sample than the newest one is ``stale_stamp`` in
-        :meth:`imu`.)"""
-        split = self.history.split(stamp_ns)
-        if split is None or self._input_at(self.history.entries[split[0]].t_ns) is not u:
-            return
-        self.late_imu_count += 1
-        self._late_imu_recent = LATE_IMU_MEMORY
-        if self._late_imu_ns is None:  # (samples come in stamp order: the first is the earliest)
-            self._late_imu_ns = stamp_ns
+    def _restore(self, entry: Entry) -> None:
+        """Put back the filter a history ``entry`` was applied to (its snapshot), at its time, with the gate
+        streaks then."""
+        self.filter, self.t_ns = entry.before, entry.before_ns
+        self.gate.streaks = dict(entry.streaks)
+        self._core_recoveries = self.filter.recoveries
+        self.extrapolation.drop()
 
     def _apply_late_imu(self) -> None:
-        """Re-apply the history from the earliest late IMU sample not yet applied (:meth:`_late_imu`), once
-        for all of them."""
-        if self._late_imu_ns is None:
-            return
-        split = self.history.split(self._late_imu_ns)
-        self._late_imu_ns = None
-        if split is None:
-            return
-        redo = self._rewind(split[1])
-        for entry in redo:
-            self._update(entry.t_ns, entry.y, entry.stream, entry.sensor, feed_monitor=False)
-        self.replayed_count += len(redo)
+        """Re-apply the history from the earliest late IMU sample not yet applied, once for all of them."""
+        stamp_ns = self.imu_hold.take_late()
+        if stamp_ns is not None:
+            self.fusion.reapply_from(stamp_ns)
 
-    def _rewind(self, j: int) -> list[Entry]:
-        """Take the history's inputs from index ``j`` on and restore the filter they were applied to (the
-        snapshot kept with input ``j``); returns them, to be re-applied."""
-        redo = self.history.take(j)
-        first = redo[0]
-        self.filter, self.t_ns, self._streaks = first.before, first.before_ns, dict(first.streaks)
+    # --- start-up and recovery -------------------------------------------------------------------------
+    def _start(self, mean: np.ndarray, cov: np.ndarray, t_ns: int, source: str) -> None:
+        """Start a fresh filter from ``mean`` ``(n,)`` and ``cov`` ``(n, n)`` at ``t_ns``, every role with it."""
+        fresh = self.factory()
+        # the filter's time is the stamps' (s), the scale of moon_epoch: a station on the rotating
+        # Moon and a field with tesseral terms turn with it
+        fresh.initialize(mean, cov, t_ns * 1e-9)  # may raise: then nothing has changed
+        self.filter = fresh
         self._core_recoveries = self.filter.recoveries
-        self._shadow = None
-        return redo
+        self.t_ns = int(t_ns)
+        self.startup.started(mean, cov, t_ns, source)
+        self.fusion.restart(t_ns)
+        self.imu_hold.forget_late()
+        self.gate.streaks = {}
+        self._reset_monitors()
+        self._store(t_ns)
 
-    def set_state(self, stamp_ns: int, mean: np.ndarray, cov: np.ndarray, now_ns: int | None) -> tuple[bool, str]:
-        """(Re-)initialise at ``stamp_ns`` with a full state ``mean`` ``(n,)`` and covariance ``cov``
-        ``(n, n)``: a state handed over (the simulator's prior; a vehicle's pre-descent state)."""
-        ok, reason = self._check_reinit_timing("set_state", stamp_ns, now_ns)
-        return self._reinitialize("set_state", stamp_ns, mean, cov) if ok else (ok, reason)
+    def _buffer(self, stamp_ns: int, y: np.ndarray, stream: str) -> tuple[bool, str]:
+        """Keep a measurement for the batch fit; start the filter when the fit is made."""
+        self.counters.accept(stream)
+        fit = self.startup.fit(stamp_ns, y)
+        if fit is None:
+            return True, "buffered"
+        self._start(*fit, stamp_ns, "measurements")
+        self.last_update_ns = stamp_ns
+        return True, ""
 
     def _check_reinit_timing(self, stream: str, stamp_ns: int, now_ns: int | None) -> tuple[bool, str]:
         # uninitialised, the measurements buffered for the batch fit have moved no filter state yet
         last = self.last_measurement_ns if self.initialized else None
-        ok, reason = check_timing(stamp_ns, last, now_ns, int(self.config.max_future * NS))
+        ok, reason = check_timing(stamp_ns, last, now_ns, self._max_future_ns)
         if not ok:
             self.counters.reject(stream, reason)
         return ok, reason
 
     def _reinitialize(self, stream: str, stamp_ns: int, mean: np.ndarray, cov: np.ndarray) -> tuple[bool, str]:
-        pending = [] if self.initialized else [(t, y) for t, y in self._init_buffer if t >= stamp_ns]
+        pending = [] if self.initialized else self.startup.buffered_since(stamp_ns)
         try:
-            self._initialize(np.asarray(mean, dtype=float), np.asarray(cov, dtype=float), stamp_ns, stream)
+            self._start(np.asarray(mean, dtype=float), np.asarray(cov, dtype=float), stamp_ns, stream)
         except Exception:  # noqa: BLE001 - e.g. a covariance the filter cannot factor
             self.counters.reject(stream, "non_finite")
             return False, "non_finite"
         self.last_measurement_ns = max(stamp_ns, self.last_measurement_ns or 0)
         self.counters.accept(stream)
         for t, y in pending:  # already counted as accepted when buffered
-            self._update(t, y)
+            self._step(t, y)
         return True, ""
 
-    def set_pose(self, stamp_ns: int, position: np.ndarray, position_cov: np.ndarray | None,
-                 now_ns: int | None) -> tuple[bool, str]:
-        """(Re-)initialise at ``stamp_ns`` with the given position; velocity from the current estimate,
-        else from the ``initial_state`` parameter. ``position_cov`` None: ``initial_std``'s."""
-        ok, reason = self._check_reinit_timing("set_pose", stamp_ns, now_ns)
-        if not ok:
-            return False, reason
-        n = self.model.state_dim
-        p, v = list(self.model.position_index), list(self.model.velocity_index)
-        mean = np.zeros(n)
-        cov = np.diag(self.config.initial_std ** 2)
-        if self.initialized and self.mean is not None:
-            if stamp_ns >= self.t_ns:
-                est = self.extrapolate(stamp_ns, force=True)
-                est_mean, est_cov = est if est is not None else (self.mean, self.cov)
-            else:
-                est_mean, est_cov = self.mean, self.cov
-            mean[v] = est_mean[v]
-            cov[np.ix_(v, v)] = est_cov[np.ix_(v, v)]
-        elif self.config.initial_state is not None:
-            mean[v] = np.asarray(self.config.initial_state)[v]
-        else:
-            self.counters.reject("set_pose", "no_velocity")
-            return False, "no_velocity"
-        mean[p] = position
-        if position_cov is not None:
-            cov[np.ix_(p, p)] = position_cov
-        return self._reinitialize("set_pose", stamp_ns, mean, cov)
-
-    def _input_at(self, stamp_ns: int) -> np.ndarray | None:
-        for t, u in reversed(self._imu):
-            if t < stamp_ns:
-                return u if (stamp_ns - t) * 1e-9 <= self.config.imu_timeout else None
-        return None
-
-    def _predict_to(self, stamp_ns: int) -> None:
-        dt = (stamp_ns - self.t_ns) * 1e-9
-        self._last_dt = dt
-        if dt > 0.0:
-            self.filter.predict(dt, self._input_at(stamp_ns))
-        self.t_ns = stamp_ns
-
-    # --- outputs ---------------------------------------------------------------------------------------
-    def extrapolate(self, now_ns: int, force: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
-        """Predicted ``(mean, cov)`` at ``now_ns`` from a copy of the filter (the filter is untouched).
-
-        None when not initialised, ``now_ns`` is not after the filter time, the horizon exceeds
-        ``max_extrapolation`` (unless ``force``) or the prediction is not finite.
-        """
-        if not self.initialized or now_ns <= self.t_ns:
-            return None
-        if not force and (now_ns - self.t_ns) * 1e-9 > self.config.max_extrapolation:
-            return None
-        if self._shadow is None or self._shadow_version != self.version or now_ns < self._shadow_ns:
-            self._shadow = copy.deepcopy(self.filter)
-            self._shadow_version = self.version
-            self._shadow_ns = self.t_ns
-        try:
-            dt = (now_ns - self._shadow_ns) * 1e-9
-            if dt > 0.0:
-                self._shadow.predict(dt, self._input_at(now_ns))
-                self._shadow_ns = now_ns
-            mean = np.array(self._shadow.mean, dtype=float)
-            cov = np.array(self._shadow.covariance, dtype=float)
-        except Exception:  # noqa: BLE001 - a failed prediction is just not published
-            self._shadow = None
-            return None
-        if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
-            self._shadow = None
-            return None
-        return mean, cov
-
-    # --- recovery --------------------------------------------------------------------------------------
     def _recover(self, stamp_ns: int, why: str) -> None:
         """Rebuild the filter from the last good estimate and predict it to ``stamp_ns``."""
-        self.reinit_count += 1
-        self.last_reinit_reason = why
-        self._last_reinit_time = self.monotonic()
-        self._shadow = None
+        self._count_reinit(why)
         if self._good is None:
             self.reset()
             return
         mean, cov, t_ns = self._good
-        try:
-            self._initialize(mean, self.config.reinit_inflation * cov, t_ns, "recovery")
-            self._predict_to(stamp_ns)
-            if not self._store(stamp_ns):
-                raise FloatingPointError("prediction from the last good estimate is not finite")
-        except Exception:  # noqa: BLE001
-            good = self._good
+        if not self._restart(mean, self.config.reinit_inflation * cov, t_ns, "recovery", stamp_ns):
+            good = self._good  # (the rebuilt filter's, when it was stored before the prediction failed)
             self.reset()
             self._good = good
 
-    # --- integrity -------------------------------------------------------------------------------------
-    def _reset_monitor(self) -> None:
-        self._fault_streak = 0                # updates in a row at FAULT
-        if self.consistency is not None:
-            self.consistency.reset()
-        if self.monitor is None:
+    def _act_on_fault(self) -> None:
+        """Re-initialise after ``fault_updates`` integrity FAULT updates in a row (``fault_action``)."""
+        why = f"integrity FAULT for {self.integrity_watch.fault_streak} updates in a row"
+        self.fault_reinit_count += 1
+        self._count_reinit(why)
+        t_ns, prior = self.t_ns, self.startup.prior
+        if self.config.fault_action == "prior" and prior is not None and self._restart(*prior, "prior", t_ns):
+            self.fusion.start_ns = t_ns  # the stamps before it belong to the state given up
+            self.last_reinit_reason = f"{why}: re-initialised from the last prior"
             return
-        if self.monitor.samples or self._skipped:
-            self.integrity_resets += 1
-        self.monitor.reset()
-        self._skipped = 0
-        self._alarms: dict[str, tuple[float, IntegrityStatus]] = {}
+        last = self.last_measurement_ns
+        self.reset(from_data=True)
+        self.last_measurement_ns = last  # the fit takes only measurements after the ones given up
+        self.last_reinit_reason = f"{why}: re-initialising from the next measurements"
 
-    def _feed_monitor(self) -> None:
-        """Give the monitor the co-state of the update just made (never raises), over the components its
-        last co-state covers (the filter's ``costate_measured``)."""
-        if self.monitor is None or not self.has_costate:
-            return
-        if self._last_dt <= 0.0:
-            self._skipped += 1
-            return
-        measured = np.array(self.filter.costate_measured, dtype=bool)
+    def _restart(self, mean: np.ndarray, cov: np.ndarray, t0_ns: int, source: str, t_ns: int) -> bool:
+        """Start the filter from ``mean`` ``(n,)``, ``cov`` ``(n, n)`` at ``t0_ns`` and predict it to ``t_ns``;
+        False when that raises or ends non-finite (the filter is then not to be used)."""
         try:
-            status = self.monitor.update(np.asarray(self.filter.costate_mean, dtype=float), measured)
-        except Exception as err:  # noqa: BLE001 - e.g. a co-state of another shape: start again
-            self.integrity_error = f"{type(err).__name__}: {err}"
-            self._reset_monitor()
-            return
-        self._fault_streak = self._fault_streak + 1 if status.level == "FAULT" else 0
-        if status.level == "FAULT":
-            self.integrity_fault_updates += 1
-        elif status.level == "WARN":
-            self.integrity_warn_updates += 1
-        if status.level != "OK":
-            self._alarms[status.level] = (self.monotonic(), status)
+            self._start(mean, cov, t0_ns, source)
+            self._predict_to(t_ns)
+            return self._store(t_ns)
+        except Exception:  # noqa: BLE001
+            return False
 
-    def _test_consistency(self, y: np.ndarray, sensor) -> None:
-        """Give the consistency monitor the innovation of ``y`` against the predicted estimate (never
-        raises): the filter's covariance too small for what the measurements show is a FAULT."""
-        if self.consistency is None:
-            return
-        try:
-            if isinstance(self.filter, SensorBiasFilter) and sensor is not None:
-                sensor, mean, cov = self.filter.predicted_estimate(sensor)
-            else:
-                mean, cov = self.filter.mean, self.filter.covariance
-            r, S = innovation_moments(sensor if sensor is not None else self._model_sensor, y, mean, cov,
-                                      self.filter.time)
-            status = self.consistency.update(r, S)
-        except Exception as err:  # noqa: BLE001 - a monitor failure must not stop the update
-            self.consistency_error = f"{type(err).__name__}: {err}"
-            self.consistency.reset()
-            return
-        if status.level == "FAULT":
-            self.consistency_fault_updates += 1
-            self._consistency_alarm = (self.monotonic(), status)
+    def _count_reinit(self, why: str) -> None:
+        self.reinit_count += 1
+        self.last_reinit_reason = why
+        self._last_reinit_time = self.monotonic()
+        self.extrapolation.drop()
 
-    def consistency_report(self) -> ConsistencyReport | None:
-        """The consistency monitor's state for the diagnostics (None when disabled)."""
-        m = self.consistency
-        if m is None:
-            return None
-        alarm, age = None, 0.0
-        if self._consistency_alarm is not None and m.status.level != "FAULT":
-            t, held = self._consistency_alarm
-            age = self.monotonic() - t
-            if self.config.monitor_hold < 0 or age < self.config.monitor_hold:
-                alarm = held
-        level = "FAULT" if alarm is not None else m.status.level
-        return ConsistencyReport(level, m.status, alarm, age, m.updates, m.rejected,
-                                 self.consistency_fault_updates, self.consistency_error)
+    def _check_core_recovery(self) -> bool:
+        """Count a re-initialisation the core filter did by itself (and reset the monitors); True if so."""
+        recoveries = self.filter.recoveries
+        recovered = recoveries > self._core_recoveries
+        if recovered:
+            self.reinit_count += recoveries - self._core_recoveries
+            self.last_reinit_reason = f"core filter recovery: {self.filter.last_recovery_reason}"
+            self._last_reinit_time = self.monotonic()
+            self._reset_monitors()
+        self._core_recoveries = recoveries
+        return recovered
 
-    def observability(self):
-        """The filter's :class:`~gpf_nav.integrity.observability.ObservabilityReport` (None before the
-        filter is initialised, or if it has none)."""
-        if not self.initialized:
-            return None
-        try:
-            return self.filter.observability
-        except Exception:  # noqa: BLE001 - a broken report must not take the diagnostics down
-            return None
+    def _reset_monitors(self) -> None:
+        self.integrity_watch.reset()
+        self.consistency_watch.reset()
+
+    def _now(self) -> float:
+        """The steady clock [s], looked up at each call (``monotonic`` may be replaced)."""
+        return self.monotonic()
+
+    @property
+    def _max_future_ns(self) -> int:
+        return int(self.config.max_future * NS)
+
+    # --- outputs ---------------------------------------------------------------------------------------
+    def extrapolate(self, now_ns: int, force: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
+        """Predicted ``(mean (n,), cov (n, n))`` at ``now_ns`` from a copy of the filter (the filter is
+        untouched); None when not initialised, ``now_ns`` is not after the filter time, the horizon exceeds
+        ``max_extrapolation`` (unless ``force``) or the prediction is not finite."""
+        return self.extrapolation.estimate(self.filter, self.t_ns, self.version, now_ns, self.imu_hold, force)
+
+    @property
+    def initialized(self) -> bool:
+        return self.t_ns is not None
+
+    @property
+    def in_error(self) -> bool:
+        """True for ``reinit_hold`` s after a re-initialisation."""
+        return self.monotonic() - self._last_reinit_time < self.config.reinit_hold
+
+    @property
+    def has_costate(self) -> bool:
+        """True when the filter computes a geometric co-state (the GPF; the SPF with compute_costate)."""
+        return COSTATE in self.filter.capabilities
+
+    # --- the roles' figures, under the names the node, the tools and the tests read ------------------
+    init_source = property(attrgetter("startup.source"))
+    init_failures = property(attrgetter("startup.fit_failures"))
+    history = property(attrgetter("fusion.history"))
+    late_count = property(attrgetter("fusion.late_count"))
+    replayed_count = property(attrgetter("fusion.replayed_count"))
+    snapshot_failures = property(attrgetter("fusion.snapshot_failures"))
+    late_imu_count = property(attrgetter("imu_hold.late_count"))
+    monitor = property(attrgetter("integrity_watch.monitor"))
+    integrity_fault_updates = property(attrgetter("integrity_watch.fault_updates"))
+    consistency = property(attrgetter("consistency_watch.monitor"))
 
     def integrity(self) -> IntegrityReport:
         """The co-state monitor's state for the diagnostics (see :class:`IntegrityReport`)."""
-        common = dict(fault_updates=self.integrity_fault_updates, warn_updates=self.integrity_warn_updates,
-                      resets=self.integrity_resets, error=self.integrity_error)
-        if self.monitor is None:
-            return IntegrityReport("disabled", **common)
-        if not self.has_costate:
-            return IntegrityReport("unavailable", **common)
-        m = self.monitor
-        status = m.status
-        level, alarm, age = status.level, None, 0.0
-        now = self.monotonic()
-        for held in ("FAULT", "WARN"):
-            if held not in self._alarms or LEVEL_RANK[held] <= LEVEL_RANK[level]:
-                continue
-            t, s = self._alarms[held]
-            if self.config.monitor_hold < 0 or now - t < self.config.monitor_hold:
-                level, alarm, age = held, s, now - t
-                break
-        return IntegrityReport("active", level, status, alarm, age, m.samples, m.rejected, self._skipped,
-                               m.quarantined, **common)
+        return self.integrity_watch.report(self.filter)
 
-    # --- summaries -------------------------------------------------------------------------------------
+    def consistency_report(self) -> ConsistencyReport | None:
+        """The consistency monitor's state for the diagnostics (None when disabled)."""
+        return self.consistency_watch.report()
+
+    def waiting_for(self) -> str:
+        """What the uninitialised engine waits for, in words (for the node's periodic warning)."""
+        return self.startup.waiting_for()
+
+    def imu_age(self, now_ns: int | None) -> float | None:
+        """Seconds from the newest IMU sample's stamp to ``now_ns`` (None before the first one). Past
+        ``imu_timeout`` the filter predicts without an input."""
+        return self.imu_hold.age(now_ns)
+
+    def imu_silent(self, now_ns: int | None) -> bool:
+        """Whether an IMU heard before has been silent for longer than ``imu_timeout`` at ``now_ns``."""
+        return self.imu_hold.silent(now_ns)
+
     def measurement_age(self, now_ns: int | None) -> float | None:
         """Seconds from the last accepted measurement's stamp to ``now_ns`` (None if none yet)."""
         if self.last_measurement_ns is None or not now_ns:
             return None
         return (now_ns - self.last_measurement_ns) * 1e-9
 
-    def imu_age(self, now_ns: int | None) -> float | None:
-        """Seconds from the newest IMU sample's stamp to ``now_ns`` (None before the first one). Past
-        ``imu_timeout`` the filter predicts without an input."""
-        if not self._imu or not now_ns:
-            return None
-        return (now_ns - self._imu[-1][0]) * 1e-9
-
-    def imu_silent(self, now_ns: int | None) -> bool:
-        """Whether an IMU heard before has been silent for longer than ``imu_timeout`` at ``now_ns``."""
-        age = self.imu_age(now_ns)
-        return age is not None and age > self.config.imu_timeout
+    def observability(self) -> ObservabilityReport | None:
+        """The filter's observability report (None before it is initialised, or if it has none)."""
+        return observability(self.filter) if self.initialized else None
 
     def filter_stats(self) -> dict:
-        """ESS/N and co-state figures of a particle filter, and the estimated unmodelled acceleration
-        ``(p,)`` with its standard deviations of a compensated filter (keys absent otherwise)."""
-        f = self.filter
-        out = {}
-        if not self.initialized:
-            return out
-        if RESAMPLING in f.capabilities:
-            out["ess"] = float(f.ess)
-            out["resample_count"] = int(f.resample_count)
-        if self.has_costate:
-            out["costate_norm_mean"] = float(f.costate_norm_mean)
-            out["costate_norm_max"] = float(f.costate_norm_max)
-        if GATE in f.capabilities:
-            out["gated"] = int(f.gated)
-        if TEMPERING in f.capabilities:
-            out["tempered_updates"] = int(f.tempered_updates)
-        if MODEL_PROBABILITIES in f.capabilities:
-            out["compensated_model_probability"] = float(1.0 - f.model_probabilities[0])
-        if COMPENSATION in f.capabilities:
-            acceleration = np.asarray(f.unmodelled_acceleration, dtype=float)
-            sigma = np.sqrt(np.clip(np.diag(f.unmodelled_acceleration_covariance), 0.0, None))
-            if np.all(np.isfinite(acceleration)) and np.all(np.isfinite(sigma)):
-                out["unmodelled_acceleration"] = acceleration
-                out["unmodelled_acceleration_std"] = sigma
-        return out
-
-    @property
-    def has_costate(self) -> bool:
-        """True when the filter computes a geometric co-state (the GPF; the SPF with compute_costate)."""
-        return COSTATE in self.filter.capabilities
+        """The filter's figures for the diagnostics (:func:`~gpf_nav.estimator.filter_figures.filter_stats`;
+        none before it is initialised)."""
+        return filter_stats(self.filter) if self.initialized else {}

@@ -4,7 +4,7 @@ it took it from.
 A late measurement (stamped before the filter's time, within ``length_ns``) is fused at its own stamp
 by restoring the last snapshot taken before the first input stamped after it, re-applying the inputs
 between, applying the late one, and re-applying the inputs that came after
-(:meth:`gpf_nav.estimator.engine.EstimatorEngine.measurement`). A snapshot is a deep copy of the filter,
+(:meth:`gpf_nav.estimator.measurements.LateFusion.fuse`). A snapshot is a deep copy of the filter,
 so it holds everything an update depends on (particles, weights, the generator's state, gate streaks);
 re-application therefore gives bit for bit the estimate of in-order delivery. No ROS here.
 

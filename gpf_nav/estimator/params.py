@@ -15,8 +15,8 @@ import re
 from dataclasses import replace
 
 from gpf_nav import resampling
-from gpf_nav.estimator.engine import FAULT_ACTIONS
 from gpf_nav.estimator.factory import FILTERS
+from gpf_nav.estimator.integrity_watch import FAULT_ACTIONS
 from gpf_nav.estimator.stations import station_errors
 from gpf_nav.estimator.streams import STREAMS, stream_parameters
 from gpf_nav.filters.gpf import METRICS, REFERENCES, WEIGHTINGS

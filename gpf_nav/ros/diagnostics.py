@@ -145,7 +145,7 @@ def filter_status(engine: EstimatorEngine, now_ns: int | None, thresholds: Thres
 
 
 def consistency_values(report) -> list[tuple[str, str]]:
-    """The ``consistency ...`` key/values of an :class:`gpf_nav.estimator.engine.ConsistencyReport`
+    """The ``consistency ...`` key/values of an :class:`gpf_nav.estimator.consistency_watch.ConsistencyReport`
     (None: disabled)."""
     if report is None:
         return [("consistency level", "disabled")]
@@ -233,7 +233,7 @@ def _integrity_problem(report) -> str:
 
 
 def integrity_values(report, filter_name: str) -> list[tuple[str, str]]:
-    """The ``integrity ...`` key/values of an :class:`gpf_nav.estimator.engine.IntegrityReport` (no NaN:
+    """The ``integrity ...`` key/values of an :class:`gpf_nav.estimator.integrity_watch.IntegrityReport` (no NaN:
     figures that do not exist read ``n/a``)."""
     if report.state == "disabled":
         head = [("integrity level", "disabled"), ("integrity monitor", "disabled (monitor_enabled: false)")]
