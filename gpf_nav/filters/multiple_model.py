@@ -94,9 +94,9 @@ class MultipleModelGPF(Filter):
         compensation_scales: the compensated members' acceleration standard deviations as fractions of
             ``unmodelled_acceleration_std``, increasing, positive, the last 1 (default
             :data:`COMPENSATION_SCALES`).
-        nesting_gate: probability of the nesting gate in [0, 1) (step 4; 0, the default, none).
         compensation_times: their correlation times as fractions of ``unmodelled_acceleration_time``,
             positive, the last 1, one per scale (default :data:`COMPENSATION_TIMES`).
+        nesting_gate: probability of the nesting gate in [0, 1) (step 4; 0, the default, none).
         seed: seed of the members' random streams (spawned from it).
         **options: further options of every member (:class:`GeometricProjectionPF`); the compensation
             options (``unmodelled_acceleration_std`` > 0, ``unmodelled_acceleration_time``) apply to the
@@ -123,6 +123,8 @@ class MultipleModelGPF(Filter):
         times = tuple(float(s) for s in compensation_times)
         if len(times) != len(scales) or times[-1] != 1.0 or not all(0.0 < t < math.inf for t in times):
             raise ValueError(f"compensation_times must be positive, one per scale, the last 1; got {compensation_times}")
+        if not 0.0 <= nesting_gate < 1.0:
+            raise ValueError(f"nesting_gate must lie in [0, 1), got {nesting_gate}")
         sigma = options.pop("unmodelled_acceleration_std", UNMODELLED_ACCELERATION_STD)
         tau = options.pop("unmodelled_acceleration_time", UNMODELLED_ACCELERATION_TIME)
         if not sigma > 0.0:
@@ -141,8 +143,6 @@ class MultipleModelGPF(Filter):
                                   **options)
             for stream, scale, time in zip(stream_of, scales, times))
         self.compensated = self.scaled[-1]
-        if not 0.0 <= nesting_gate < 1.0:
-            raise ValueError(f"nesting_gate must lie in [0, 1), got {nesting_gate}")
         self.nesting_gate = float(nesting_gate)
         self._nesting_limit = float(chi2.ppf(nesting_gate, model.state_dim)) if nesting_gate else math.inf
         self.compensation_scales, self.compensation_times = scales, times
