@@ -9,10 +9,9 @@ against a compensation sized for the paper's 9 % gravity mismatch, 0.13 m/s^2); 
 cannot be followed. :class:`MultipleModelGPF` tests the hypotheses instead of assuming one: GPFs run in
 parallel, one on the user's model as it is (``nominal``) and one per compensation scale, with
 ``sigma_j = compensation_scales[j] * unmodelled_acceleration_std`` and correlation time
-``tau_j = compensation_times[j] * unmodelled_acceleration_time``: by default one member, 0.1 m/s^2 and
-1e6 s; :data:`LADDER` gives three (1e-3, 1e-2 and 0.1 m/s^2 with 2e4, 2e3 and 1e6 s), so that a force
-from 1e-4 to 0.2 m/s^2, constant or turning along the orbit, has a member of its size and pace (the
-registry's ``gpf-ladder``). A Markov chain switches
+``tau_j = compensation_times[j] * unmodelled_acceleration_time``: by default three members, 1e-3, 1e-2
+and 0.1 m/s^2 with 2e4, 2e3 and 1e6 s, so that a force from 1e-4 to 0.2 m/s^2, constant or turning
+along the orbit, has a member of its size and pace. A Markov chain switches
 between the ``K`` models with mean sojourn ``switch_time``, a switch going to each other model alike.
 Each cycle is Blom's interacting multiple model (IMM):
 
@@ -50,7 +49,6 @@ GPF.
 from __future__ import annotations
 
 import math
-from types import MappingProxyType
 
 import numpy as np
 from scipy.stats import chi2
@@ -65,19 +63,21 @@ from gpf_nav.models.state_space import StateSpaceModel
 
 SWITCH_TIME = 2.0e5
 """Default mean sojourn time of the model chain, s (switching probability 1e-5 per 2 s step)."""
-COMPENSATION_SCALES = (1.0,)
+COMPENSATION_SCALES = (0.01, 0.1, 1.0)
 """Default compensation scales: the compensated members' ``sigma`` as fractions of
-``unmodelled_acceleration_std`` (module docstring)."""
-COMPENSATION_TIMES = (1.0,)
-"""Default correlation times of the compensated members as fractions of ``unmodelled_acceleration_time``."""
-NESTING_GATE = 0.0
+``unmodelled_acceleration_std`` (module docstring): with its default 0.1 m/s^2, members of 1e-3, 1e-2
+and 0.1 m/s^2, so that the Moon's J2 (4.6e-4 m/s^2), a thrust of a few mm/s^2 and the paper's 9 %
+mismatch (0.13 m/s^2) each have a member of their size."""
+COMPENSATION_TIMES = (0.02, 0.002, 1.0)
+"""Default correlation times of the compensated members as fractions of ``unmodelled_acceleration_time``
+(with its default 1e6 s: 2e4, 2e3 and 1e6 s). A force of size ``sigma`` changes by about
+``sigma sqrt(2 T / tau)`` over a time ``T``: the smallest member follows J2 as it varies along the
+orbit, the middle one a thrust that turns, the widest one learns a constant mismatch and keeps it."""
+NESTING_GATE = 0.999
 """Probability of the chi-square gate by which the widest member's posterior must admit a narrower
-member's estimate for that member to keep its probability (0: no gate)."""
-LADDER = MappingProxyType({"compensation_scales": (0.01, 0.1, 1.0), "compensation_times": (0.02, 0.002, 1.0),
-                           "nesting_gate": 0.999})
-"""Options of three compensated members, 1e-3, 1e-2 and 0.1 m/s^2 with 2e4, 2e3 and 1e6 s (with the default
-std and time), with the nesting gate: the registry's ``gpf-ladder`` (what it buys and costs against the
-default: docs/results.md, *The Moon's own gravity*)."""
+member's estimate for that member to keep its probability (0: no gate). Without it, where the data
+cannot see a direction (no azimuth) a small, fast member explains the error left there with a wrong
+state and wins the evidence."""
 
 
 class MultipleModelGPF(Filter):
@@ -96,7 +96,8 @@ class MultipleModelGPF(Filter):
             :data:`COMPENSATION_SCALES`).
         compensation_times: their correlation times as fractions of ``unmodelled_acceleration_time``,
             positive, the last 1, one per scale (default :data:`COMPENSATION_TIMES`).
-        nesting_gate: probability of the nesting gate in [0, 1) (step 4; 0, the default, none).
+        nesting_gate: probability of the nesting gate in [0, 1) (step 4; 0: none; default
+            :data:`NESTING_GATE`).
         seed: seed of the members' random streams (spawned from it).
         **options: further options of every member (:class:`GeometricProjectionPF`); the compensation
             options (``unmodelled_acceleration_std`` > 0, ``unmodelled_acceleration_time``) apply to the
