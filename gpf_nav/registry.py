@@ -21,6 +21,7 @@ from gpf_nav.filters import (BootstrapPF, CompensatedEKF, EnsembleKF, ExtendedKF
 from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD
 from gpf_nav.filters.gating import OUTLIER_GATE, OUTLIER_GATE_LIMIT
 from gpf_nav.filters.gpf import OBSERVABILITY_CONSTRAINT
+from gpf_nav.filters.interface import N_PARTICLES
 from gpf_nav.filters.multiple_model import COMPENSATION_SCALES, COMPENSATION_TIMES, NESTING_GATE, SWITCH_TIME
 from gpf_nav.models.state_space import StateSpaceModel
 
@@ -228,7 +229,7 @@ def label(key: str) -> str:
     return lookup(key).label
 
 
-def make(key: str, model: StateSpaceModel, n_particles: int = 500, seed=None, **options) -> Filter:
+def make(key: str, model: StateSpaceModel, n_particles: int = N_PARTICLES, seed=None, **options) -> Filter:
     """Build the filter ``key`` (name, alias or label) on ``model`` with ``n_particles`` particles or
     members (ignored by the Gaussian filters) and ``seed``; options the entry does not take are dropped."""
     entry = lookup(key)

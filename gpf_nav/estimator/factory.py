@@ -11,6 +11,7 @@ import numpy as np
 
 from gpf_nav import registry
 from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME
+from gpf_nav.filters.interface import N_PARTICLES
 from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
 from gpf_nav.filters.multiple_model import COMPENSATION_SCALES, COMPENSATION_TIMES, NESTING_GATE, SWITCH_TIME
 from gpf_nav.models.gravity import FIELDS, make_field
@@ -21,7 +22,7 @@ FILTERS = registry.node_names()
 is its former name, kept); ``gpf-single`` one compensated GPF."""
 
 
-def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 0,
+def make_filter(name: str, model, *, n_particles: int = N_PARTICLES, seed: int | None = 0,
                 reference: str = "innovation", weighting: str = "corrected",
                 metric: str = "cloud", regularization: float = 0.0,
                 unmodelled_acceleration_std: float = UNMODELLED_ACCELERATION_STD,

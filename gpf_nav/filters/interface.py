@@ -59,6 +59,9 @@ ATTRIBUTES: dict[str, tuple[str, ...]] = {
 """The attributes and methods of :class:`Filter` that answer each capability (what a composite filter,
 :mod:`gpf_nav.filters.composite`, reads from the member that answers it)."""
 
+N_PARTICLES = 500
+"""Default number of particles or ensemble members of the filters that have a :data:`CLOUD`."""
+
 _EMPTY_VECTOR = np.zeros(0)
 _EMPTY_VECTOR.flags.writeable = False
 _EMPTY_MATRIX = np.zeros((0, 0))

@@ -57,7 +57,7 @@ from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD, UNMODELLED_
 from gpf_nav.filters.gpf import GeometricProjectionPF
 from gpf_nav.filters.composite import Composite
 from gpf_nav.filters.interface import (CLOUD, COMPENSATION, COSTATE, GATE, MODEL_PROBABILITIES, RESAMPLING,
-                                       TEMPERING)
+                                       TEMPERING, N_PARTICLES)
 from gpf_nav.filters.model_averaging import mixture_moments
 from gpf_nav.linalg import positive_definite
 from gpf_nav.models.state_space import StateSpaceModel
@@ -113,7 +113,7 @@ class MultipleModelGPF(Composite):
         model_probabilities: ``(K,)`` probabilities of the nominal model, then of :attr:`scaled`'s.
     """
 
-    def __init__(self, model: StateSpaceModel, n_particles: int = 500, switch_time: float = SWITCH_TIME,
+    def __init__(self, model: StateSpaceModel, n_particles: int = N_PARTICLES, switch_time: float = SWITCH_TIME,
                  seed: int | np.random.Generator | None = None,
                  compensation_scales: tuple[float, ...] = COMPENSATION_SCALES,
                  compensation_times: tuple[float, ...] = COMPENSATION_TIMES,
