@@ -199,11 +199,11 @@ for _entry in (
     FilterEntry("gpf-single", "GPF single model (compensated)", _gpf_variant(), "gpf",
                 GPF_OPTIONS | {"nominal_prior"}, node=True,
                 description="one navigation-grade GPF on the compensated model, averaged with the nominal "
-                            "hypothesis by Savage-Dickey (the default before the multiple model)"),
+                            "hypothesis by Savage-Dickey"),
     FilterEntry("gpf-mean", "GPF navigation, mean-linearised update", _gpf, "gpf",
                 GPF_OPTIONS | MEMBER_OPTIONS,
                 description="gpf with the measurement linearised once at each member's mean (linearization "
-                            "mean: the default before issue 23; it narrows what the data cannot see)"),
+                            "mean; it narrows what the data cannot see)"),
     FilterEntry("gpf-qmetric", "GPF Q-metric (innovation, corrected, eps=1)",
                 _gpf_variant(reference="innovation", weighting="corrected", metric="process_noise",
                              regularization=1.0, unmodelled_acceleration_std=0.0), "gpf", GPF_OPTIONS,

@@ -19,7 +19,7 @@ from gpf_nav.models.lunar import LunarDescentModel
 
 FILTERS = registry.node_names()
 """The node's filters (:func:`gpf_nav.registry.node_names`): ``gpf`` is the multiple-model GPF (``gpf-mm``
-is its former name, kept); ``gpf-single`` one compensated GPF."""
+an alias); ``gpf-single`` one compensated GPF."""
 
 
 def make_filter(name: str, model, *, n_particles: int = N_PARTICLES, seed: int | None = 0,
