@@ -2,13 +2,11 @@
 
 A filter step allocates and frees a few arrays of ``N x n`` floats (megabytes at N = 10,000). With
 glibc's default, adaptive policy such blocks are given back to the kernel at every ``free`` (``mmap``
-or a heap trim) and taken again at the next step, so each step pays hundreds of page faults: at
-N = 10,000 this was about 0.9 ms of the GPF's 2.2 ms step on the development machine. Taking every
+or a heap trim) and taken again at the next step, so each step pays hundreds of page faults. Taking every
 block from the heap (no ``mmap``: glibc maps blocks beyond 32 MiB, a 9 x 1,000,000 cloud is 72 MB) and
 raising the trim threshold to 1 GiB keeps them there: the process keeps up to that much freed memory,
-and a step stops faulting. At N = 1,000,000 the default GPF's step went from 1.9 s to 1.15 s, its peak
-resident memory from 1.15 to 1.23 GB (fixing the ``mmap`` threshold at glibc's largest, 32 MiB, with a
-128 MiB trim threshold, as before, left it at 1.9 s).
+and a step stops faulting, for a slightly larger peak resident memory. Fixing the ``mmap`` threshold at
+glibc's largest, 32 MiB, is not enough: a large cloud's blocks are beyond it.
 
 The ``gpf-nav`` command and the ``estimator`` node call :func:`retain_freed_memory` at start-up; a
 program of your own that runs the filters can do the same. It changes nothing but speed and resident memory.

@@ -2,9 +2,8 @@
 
 A filter step hands BLAS products of ``N``-long arrays (the process noise ``L z``, weighted
 covariances). OpenBLAS threads them across every core; on a machine busy with other work its worker
-threads wait for a core, and on the 2-core development machine with two busy processes beside it a
-bootstrap-PF step at N = 20 000 took 16 ms instead of 3.4 ms (``python -m
-gpf_nav.experiments.blas_bench``). One thread per filter process avoids that stall; run several
+threads wait for a core, and a step stalls for many times its own cost (``python -m
+gpf_nav.experiments.blas_bench`` measures it). One thread per filter process avoids that stall; run several
 processes for parallelism (as ``gpf-nav montecarlo`` does).
 
 ``gpf-nav`` and the ``estimator`` node call :func:`limit_blas_threads` at start-up; a program of your

@@ -21,6 +21,7 @@ from gpf_nav.filters import (BootstrapPF, CompensatedEKF, EnsembleKF, ExtendedKF
 from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD
 from gpf_nav.filters.gating import OUTLIER_GATE, OUTLIER_GATE_LIMIT
 from gpf_nav.filters.gpf import OBSERVABILITY_CONSTRAINT
+from gpf_nav.filters.interface import N_PARTICLES
 from gpf_nav.filters.multiple_model import COMPENSATION_SCALES, COMPENSATION_TIMES, NESTING_GATE, SWITCH_TIME
 from gpf_nav.models.state_space import StateSpaceModel
 
@@ -198,11 +199,11 @@ for _entry in (
     FilterEntry("gpf-single", "GPF single model (compensated)", _gpf_variant(), "gpf",
                 GPF_OPTIONS | {"nominal_prior"}, node=True,
                 description="one navigation-grade GPF on the compensated model, averaged with the nominal "
-                            "hypothesis by Savage-Dickey (the default before the multiple model)"),
+                            "hypothesis by Savage-Dickey"),
     FilterEntry("gpf-mean", "GPF navigation, mean-linearised update", _gpf, "gpf",
                 GPF_OPTIONS | MEMBER_OPTIONS,
                 description="gpf with the measurement linearised once at each member's mean (linearization "
-                            "mean: the default before issue 23; it narrows what the data cannot see)"),
+                            "mean; it narrows what the data cannot see)"),
     FilterEntry("gpf-qmetric", "GPF Q-metric (innovation, corrected, eps=1)",
                 _gpf_variant(reference="innovation", weighting="corrected", metric="process_noise",
                              regularization=1.0, unmodelled_acceleration_std=0.0), "gpf", GPF_OPTIONS,
@@ -228,7 +229,7 @@ def label(key: str) -> str:
     return lookup(key).label
 
 
-def make(key: str, model: StateSpaceModel, n_particles: int = 500, seed=None, **options) -> Filter:
+def make(key: str, model: StateSpaceModel, n_particles: int = N_PARTICLES, seed=None, **options) -> Filter:
     """Build the filter ``key`` (name, alias or label) on ``model`` with ``n_particles`` particles or
     members (ignored by the Gaussian filters) and ``seed``; options the entry does not take are dropped."""
     entry = lookup(key)

@@ -13,8 +13,9 @@ import pytest
 from gpf_nav import registry
 from gpf_nav.estimator.factory import FILTERS, make_filter
 from gpf_nav.filters import Filter, SensorBiasFilter
+from gpf_nav.filters.composite import Composite
 from gpf_nav.filters.multiple_model import MultipleModelGPF
-from gpf_nav.filters.interface import (CAPABILITIES, CLOUD, COMPENSATION, COSTATE, GATE, MODEL_PROBABILITIES,
+from gpf_nav.filters.interface import (ATTRIBUTES, CAPABILITIES, CLOUD, COMPENSATION, COSTATE, GATE, MODEL_PROBABILITIES,
                                        RESAMPLING, SENSOR_BIAS, TEMPERING)
 from gpf_nav.sensors import ModelSensor, random_constant_bias
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
@@ -118,5 +119,22 @@ def test_every_filter_is_a_filter_and_answers_what_it_declares(make):
     trackers = flt.observability_trackers()
     assert trackers and all(tracker.ready and tracker.updates > 0 for tracker in trackers)
     assert any(tracker.report() is flt.observability for tracker in trackers)
-    runs = flt.filter if isinstance(flt, SensorBiasFilter) else flt
-    assert len(trackers) == (len(runs.members) if isinstance(runs, MultipleModelGPF) else 1)
+    assert len(trackers) == len(_leaves(flt))
+
+
+def _leaves(flt: Filter) -> list[Filter]:
+    """The filters that run: ``flt``, or its members' leaves if it is a composite."""
+    return [leaf for m in flt.members for leaf in _leaves(m)] if isinstance(flt, Composite) else [flt]
+
+
+def test_every_capability_attribute_is_declared_on_filter_and_read_through_composites():
+    assert set(ATTRIBUTES) == set(CAPABILITIES)
+    assert all(hasattr(Filter, name) for names in ATTRIBUTES.values() for name in names)
+    flt = _run(_biased("gpf"))
+    imm = flt.filter
+    assert isinstance(imm, MultipleModelGPF)
+    assert flt.capabilities == imm.capabilities | {SENSOR_BIAS}
+    assert flt.ess == imm.ess and flt.gated == imm.gated and flt.particles.shape == imm.particles.shape
+    assert np.array_equal(flt.costate_mean, imm.compensated.costate_mean)  # the member the IMM delegates the co-state to
+    assert flt.recoveries == imm.recoveries and flt.time == imm.time == imm.compensated.time
+    assert flt.observability is imm.observability is imm.nominal.observability

@@ -12,7 +12,6 @@ from typing import Callable
 import numpy as np
 
 from gpf_nav.estimator.engine_config import EngineConfig
-from gpf_nav.filters import SensorBiasFilter
 from gpf_nav.filters.interface import Filter
 from gpf_nav.integrity import ConsistencyMonitor, ConsistencyStatus, innovation_moments
 from gpf_nav.models.state_space import StateSpaceModel
@@ -82,7 +81,7 @@ class ConsistencyWatch:
         if self.monitor is None:
             return
         try:
-            if isinstance(flt, SensorBiasFilter) and sensor is not None:
+            if sensor is not None:  # with the sensor's estimated bias, if any
                 sensor, mean, cov = flt.predicted_estimate(sensor)
             else:
                 mean, cov = flt.mean, flt.covariance

@@ -11,6 +11,7 @@ import numpy as np
 
 from gpf_nav import registry
 from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME
+from gpf_nav.filters.interface import N_PARTICLES
 from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
 from gpf_nav.filters.multiple_model import COMPENSATION_SCALES, COMPENSATION_TIMES, NESTING_GATE, SWITCH_TIME
 from gpf_nav.models.gravity import FIELDS, make_field
@@ -18,10 +19,10 @@ from gpf_nav.models.lunar import LunarDescentModel
 
 FILTERS = registry.node_names()
 """The node's filters (:func:`gpf_nav.registry.node_names`): ``gpf`` is the multiple-model GPF (``gpf-mm``
-is its former name, kept); ``gpf-single`` one compensated GPF."""
+an alias); ``gpf-single`` one compensated GPF."""
 
 
-def make_filter(name: str, model, *, n_particles: int = 500, seed: int | None = 0,
+def make_filter(name: str, model, *, n_particles: int = N_PARTICLES, seed: int | None = 0,
                 reference: str = "innovation", weighting: str = "corrected",
                 metric: str = "cloud", regularization: float = 0.0,
                 unmodelled_acceleration_std: float = UNMODELLED_ACCELERATION_STD,

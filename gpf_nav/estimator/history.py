@@ -15,7 +15,7 @@ the next one comes (``extra``): the re-application then starts at that input ins
 
 Memory: one filter copy per :data:`SNAPSHOT_EVERY` inputs of the last ``length_ns`` (for the lunar GPF with
 N particles about ``N * 9 * 8`` bytes of particles plus their weights and caches). Cost: a copy every
-:data:`SNAPSHOT_EVERY` inputs (0.3 ms for the default GPF at N = 500, a tenth of its step); restoring is
+:data:`SNAPSHOT_EVERY` inputs; restoring is
 free (the snapshot object becomes the filter); a late input stamped before ``k`` kept ones costs up to
 ``k + SNAPSHOT_EVERY`` predict/update steps.
 """

@@ -28,7 +28,6 @@ from scipy.stats import chi2
 from gpf_nav.estimator.engine_config import NS, EngineConfig
 from gpf_nav.estimator.history import Entry, History
 from gpf_nav.estimator.input_checks import ReapplyBudget
-from gpf_nav.filters import SensorBiasFilter
 from gpf_nav.filters.interface import Filter
 from gpf_nav.sensors import Sensor, innovation_distance
 
@@ -61,10 +60,7 @@ class InnovationGate:
         probability = self.config.gates.get(stream, 0.0)
         if sensor is None or probability <= 0.0:
             return False
-        if isinstance(flt, SensorBiasFilter):  # the sensor's estimated bias is part of its prediction
-            sensor, mean, cov = flt.predicted_estimate(sensor)
-        else:
-            mean, cov = flt.mean, flt.covariance
+        sensor, mean, cov = flt.predicted_estimate(sensor)  # with the sensor's estimated bias, if any
         d2, k = innovation_distance(sensor, y, mean, cov, flt.time)
         if k == 0 or d2 <= _chi2_threshold(probability, k):
             self.streaks[stream] = 0

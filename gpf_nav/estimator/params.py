@@ -15,12 +15,16 @@ import re
 from dataclasses import replace
 
 from gpf_nav import resampling
+from gpf_nav.estimator.engine_config import NODE_FAULT_ACTION, NODE_MAX_MEASUREMENT_RATE, EngineConfig
 from gpf_nav.estimator.factory import FILTERS
 from gpf_nav.estimator.integrity_watch import FAULT_ACTIONS
 from gpf_nav.estimator.stations import station_errors
 from gpf_nav.estimator.streams import STREAMS, stream_parameters
 from gpf_nav.filters.gpf import METRICS, REFERENCES, WEIGHTINGS
-from gpf_nav.filters.multiple_model import COMPENSATION_SCALES, COMPENSATION_TIMES, NESTING_GATE
+from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME
+from gpf_nav.filters.interface import N_PARTICLES
+from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
+from gpf_nav.filters.multiple_model import COMPENSATION_SCALES, COMPENSATION_TIMES, NESTING_GATE, SWITCH_TIME
 from gpf_nav.models.gravity import FIELDS
 from gpf_nav.models.lunar import MU_MOON
 from gpf_nav.registry import FLATTENING_HORIZON
@@ -29,6 +33,8 @@ from gpf_nav.schema import ParameterError, Spec, check, coerce
 FILTER_GROUP = "Filter"
 """The group of ``make_filter``'s options (every parameter in it but ``filter`` itself)."""
 _BY_FILTER = "make_filter"
+_ENGINE = EngineConfig()
+"""The engine's defaults, which are the node's (:mod:`gpf_nav.estimator.engine_config`)."""
 
 
 def _group(name: str, *specs: Spec) -> list[Spec]:
@@ -39,19 +45,19 @@ ESTIMATOR = [
     *_group(
         FILTER_GROUP,
         Spec("filter", "gpf", "gpf (geometric projection PF, multiple model: nominal or compensated at 1e-3, 1e-2 and 0.1 m/s^2), gpf-single (one compensated GPF), gpf-mm and gpf-ladder (= gpf), spf (bootstrap PF), ekf, ukf or enkf.", choices=FILTERS, checked_by=_BY_FILTER),
-        Spec("n_particles", 500, "Number of particles / ensemble members (gpf, spf, enkf); >= 2 for enkf.", bounds=">= 1", symbol="N", checked_by=_BY_FILTER),
+        Spec("n_particles", N_PARTICLES, "Number of particles / ensemble members (gpf, spf, enkf); >= 2 for enkf.", bounds=">= 1", symbol="N", checked_by=_BY_FILTER),
         Spec("seed", 0, "Seed of the filter's random stream; negative: a random seed."),
         Spec("reference", "innovation", "GPF projection reference; increment needs metric euclidean or process_noise.", choices=REFERENCES, checked_by=_BY_FILTER),
         Spec("weighting", "corrected", "GPF weighting: corrected (exact proposal correction) or likelihood (paper).", choices=WEIGHTINGS, checked_by=_BY_FILTER),
         Spec("metric", "cloud", "GPF projection metric: cloud (predicted cloud's covariance; navigation default), euclidean (paper) or process_noise (metric of Q(dt)).", choices=METRICS, checked_by=_BY_FILTER),
         Spec("regularization", 0.0, "Tikhonov eps of the projection; 0: the metric's default (1 for cloud, 1e-6 otherwise); relative for euclidean, in measurement-noise units otherwise.", bounds=">= 0", checked_by=_BY_FILTER),
-        Spec("unmodelled_acceleration_std", 0.1, "gpf: stationary std of the estimated unmodelled acceleration; 0 turns the compensation off (gpf-mm needs it positive).", "m/s^2", ">= 0", checked_by=_BY_FILTER),
-        Spec("unmodelled_acceleration_time", 1.0e6, "gpf: correlation time of the unmodelled acceleration.", "s", "> 0", checked_by=_BY_FILTER),
-        Spec("nominal_prior", 0.5, "gpf-single: prior probability that the model needs no unmodelled acceleration; the estimate averages the two hypotheses; 0 publishes the compensated posterior as it is.", bounds="[0, 1)", checked_by=_BY_FILTER),
+        Spec("unmodelled_acceleration_std", UNMODELLED_ACCELERATION_STD, "gpf: stationary std of the estimated unmodelled acceleration; 0 turns the compensation off (gpf-mm needs it positive).", "m/s^2", ">= 0", checked_by=_BY_FILTER),
+        Spec("unmodelled_acceleration_time", UNMODELLED_ACCELERATION_TIME, "gpf: correlation time of the unmodelled acceleration.", "s", "> 0", checked_by=_BY_FILTER),
+        Spec("nominal_prior", NOMINAL_PRIOR, "gpf-single: prior probability that the model needs no unmodelled acceleration; the estimate averages the two hypotheses; 0 publishes the compensated posterior as it is.", bounds="[0, 1)", checked_by=_BY_FILTER),
         Spec("compensation_scales", list(COMPENSATION_SCALES), "gpf: the compensated members' acceleration stds as fractions of unmodelled_acceleration_std, increasing to 1: one member per scale beside the nominal one, so that a force from far below to the size of unmodelled_acceleration_std has a member of its size.", bounds="(0, 1]", checked_by=_BY_FILTER),
         Spec("compensation_times", list(COMPENSATION_TIMES), "gpf: the compensated members' correlation times as fractions of unmodelled_acceleration_time, one per compensation scale, the last 1: a member of short time follows a force that varies along the orbit.", bounds="> 0", checked_by=_BY_FILTER),
         Spec("nesting_gate", NESTING_GATE, "gpf: chi-square probability of the gate by which the widest compensated member must admit another member's estimate for it to keep its probability (a member that explains an error the data cannot see with a narrower model); 0: no gate.", bounds="[0, 1)", checked_by=_BY_FILTER),
-        Spec("model_switch_time", 2.0e5, "gpf: mean sojourn time of the nominal / compensated model chain.", "s", "> 0", checked_by=_BY_FILTER),
+        Spec("model_switch_time", SWITCH_TIME, "gpf: mean sojourn time of the nominal / compensated model chain.", "s", "> 0", checked_by=_BY_FILTER),
         Spec("kernel_bandwidth", 0.0, "gpf, cloud metric: kernel bandwidth h; 0: the default, the Gaussian-optimal one for N and the state dimension, 1.6 times it while an update is tempered or gated (gpf-single: 1.6 times it always; at most 0.95).", bounds="[0, 1)", symbol="h", checked_by=_BY_FILTER),
         Spec("flattening_horizon", FLATTENING_HORIZON, "gpf: the update runs in coordinates where the measurement now and of the state flowed half this and this far ahead is linear, so the cloud keeps its spread along what the data cannot see; 0: the measurement now only.", "s", ">= 0", checked_by=_BY_FILTER),
         Spec("collapse_steps", 0, "gpf/spf: re-initialise after this many consecutive updates with ESS < 1.5 particles; 0 never.", bounds=">= 0", checked_by=_BY_FILTER),
@@ -95,27 +101,27 @@ ESTIMATOR = [
     *_group(
         "Initialisation",
         Spec("initial_state", None, "Initial [x, y, z, vx, vy, vz] in world_frame; unset: set_state, set_pose or measurements.", "m, m/s", "finite", length=6),
-        Spec("initial_std", [1e3, 1e3, 1e3, 1.0, 1.0, 1.0], "Initial standard deviations.", "m, m/s", "> 0", length=6),
-        Spec("initial_stamp", -1.0, "ROS time of initial_state; negative: the first accepted measurement's stamp.", "s", "finite"),
-        Spec("init_window", 10, "Measurements used to initialise from the data when no initial state is given.", bounds=">= 2"),
+        Spec("initial_std", _ENGINE.initial_std.tolist(), "Initial standard deviations.", "m, m/s", "> 0", length=6),
+        Spec("initial_stamp", _ENGINE.initial_stamp, "ROS time of initial_state; negative: the first accepted measurement's stamp.", "s", "finite"),
+        Spec("init_window", _ENGINE.init_window, "Measurements used to initialise from the data when no initial state is given.", bounds=">= 2"),
     ),
     *_group(
         "Timing and input handling",
         Spec("publish_rate", 10.0, "Rate of predicted odometry between measurements (node clock); 0 disables.", "Hz", ">= 0"),
-        Spec("max_future", 1.0, "Refuse stamps more than this ahead of the node clock.", "s", "> 0"),
+        Spec("max_future", _ENGINE.max_future, "Refuse stamps more than this ahead of the node clock.", "s", "> 0"),
         Spec("reset_on_time_jump", True, "Reset the filter when the node clock jumps back by more than 1 s (a restarted simulator or bag), checked on every input and every diagnostics_period, whatever publish_rate; false: the jump is only counted and logged."),
-        Spec("imu_timeout", 1.0, "An IMU sample older than this (relative to the measurement) is not used.", "s", "> 0"),
-        Spec("max_extrapolation", 300.0, "Do not publish predictions more than this past the last measurement.", "s", "> 0"),
-        Spec("max_measurement_rate", 1000.0, "Process at most this many measurements per second (steady clock); 0: unlimited.", "Hz", ">= 0"),
+        Spec("imu_timeout", _ENGINE.imu_timeout, "An IMU sample older than this (relative to the measurement) is not used.", "s", "> 0"),
+        Spec("max_extrapolation", _ENGINE.max_extrapolation, "Do not publish predictions more than this past the last measurement.", "s", "> 0"),
+        Spec("max_measurement_rate", NODE_MAX_MEASUREMENT_RATE, "Process at most this many measurements per second (steady clock); 0: unlimited.", "Hz", ">= 0"),
         Spec("queue_depth", 10, "Depth of the sensor-data (best-effort) subscription queues.", bounds=">= 1"),
         Spec("quaternion_tolerance", 0.01, "Allowed | |q| - 1 | of an IMU orientation.", bounds="> 0"),
     ),
     *_group(
         "Measurement streams (gpf_nav.estimator.streams), late measurements",
-        Spec("history_length", 10.0, "A measurement stamped up to this long before the filter's time is fused at its stamp (the later inputs are re-applied); older ones are refused; 0: none.", "s", ">= 0"),
-        Spec("reapply_budget", 0.5, "Seconds of lateness that late measurements may have re-applied per second of the filter's time (at most history_length s saved up, full at start): one whose lateness exceeds what is left is refused (reapply_budget); 0: unlimited.", "s/s", ">= 0"),
+        Spec("history_length", _ENGINE.history_length, "A measurement stamped up to this long before the filter's time is fused at its stamp (the later inputs are re-applied); older ones are refused; 0: none.", "s", ">= 0"),
+        Spec("reapply_budget", _ENGINE.reapply_budget, "Seconds of lateness that late measurements may have re-applied per second of the filter's time (at most history_length s saved up, full at start): one whose lateness exceeds what is left is refused (reapply_budget); 0: unlimited.", "s/s", ">= 0"),
         *stream_parameters(STREAMS),
-        Spec("gate_limit", 5, "After this many refusals of a gate in a row the next measurement of that stream is used.", bounds=">= 0"),
+        Spec("gate_limit", _ENGINE.gate_limit, "After this many refusals of a gate in a row the next measurement of that stream is used.", bounds=">= 0"),
     ),
     *_group(
         "Outputs and diagnostics",
@@ -124,7 +130,7 @@ ESTIMATOR = [
         Spec("ess_warn_threshold", 0.05, "WARN when ESS/N falls below this.", bounds="[0, 1]", live=True),
         Spec("costate_warn_threshold", 50.0, "WARN when the mean co-state norm exceeds this (1/s with the cloud and process_noise metrics, whitened, about 1 nominally; m^2/s with euclidean).", "1/s or m^2/s", "> 0", live=True),
         Spec("sensor_timeout", 10.0, "WARN when no measurement was accepted for this long (node clock).", "s", "> 0", live=True),
-        Spec("reinit_hold", 10.0, "Diagnostics stay ERROR this long after a re-initialisation (steady clock).", "s", ">= 0"),
+        Spec("reinit_hold", _ENGINE.reinit_hold, "Diagnostics stay ERROR this long after a re-initialisation (steady clock).", "s", ">= 0"),
     ),
     *_group(
         "Integrity monitor (co-state; gpf, and spf with compute_costate)",
@@ -136,9 +142,9 @@ ESTIMATOR = [
         Spec("monitor_false_alarm_rate", 1e-3, "Per-update probability of FAULT (diagnostics ERROR) on a consistent filter.", bounds="(0, 1)"),
         Spec("monitor_warn_false_alarm_rate", 1e-2, "Per-update probability of WARN or worse on a consistent filter; >= monitor_false_alarm_rate.", bounds="(0, 1)"),
         Spec("monitor_quarantine_rate", -1.0, "p-value below which a window is kept out of the reference; negative: monitor_false_alarm_rate / 100; 0: no quarantine; at most monitor_false_alarm_rate.", bounds="finite"),
-        Spec("integrity_fault_action", "measurements", "After integrity_fault_updates co-state monitor FAULT updates in a row: measurements (start again from the next init_window measurements), prior (from the last initial state: parameters, set_state, set_pose or batch fit, predicted to now) or none (report only).", choices=FAULT_ACTIONS),
-        Spec("integrity_fault_updates", 30, "Co-state monitor FAULT updates in a row that make integrity_fault_action act.", bounds=">= 1"),
-        Spec("monitor_hold", 5.0, "A monitor WARN or FAULT (co-state or consistency) stays in /diagnostics this long after the update that raised it (steady clock); negative: latched until ~/reset or a re-initialisation.", "s", "finite"),
+        Spec("integrity_fault_action", NODE_FAULT_ACTION, "After integrity_fault_updates co-state monitor FAULT updates in a row: measurements (start again from the next init_window measurements), prior (from the last initial state: parameters, set_state, set_pose or batch fit, predicted to now) or none (report only).", choices=FAULT_ACTIONS),
+        Spec("integrity_fault_updates", _ENGINE.fault_updates, "Co-state monitor FAULT updates in a row that make integrity_fault_action act.", bounds=">= 1"),
+        Spec("monitor_hold", _ENGINE.monitor_hold, "A monitor WARN or FAULT (co-state or consistency) stays in /diagnostics this long after the update that raised it (steady clock); negative: latched until ~/reset or a re-initialisation.", "s", "finite"),
     ),
     *_group(
         "Consistency monitor (normalised innovations; every filter)",

@@ -29,8 +29,9 @@ from pathlib import Path
 
 from gpf_nav.arguments import CommandParser, positive_int
 from gpf_nav.experiments.montecarlo import base_config, git_commit, parse_filters, run_metadata, write_json
-from gpf_nav.experiments.runner import DEFAULT_PARTICLES, NEES_BOUND, REPORT_AFTER
+from gpf_nav.experiments.runner import NEES_BOUND, REPORT_AFTER
 from gpf_nav.experiments.stress import BEYOND, GRAVITY, _num, stress
+from gpf_nav.filters.interface import N_PARTICLES
 
 SCHEMA = "gpf_nav.honesty/1"
 DEFAULT_FILTERS = "gpf,gpf-single,ekf-comp-gated,ekf,gpf-paper"
@@ -98,8 +99,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="base scenario YAML (default: the built-in defaults, epsilon set to 0)")
     parser.add_argument("--duration", type=float, default=None, help="override the duration (s)")
     parser.add_argument("--dt", type=float, default=None, help="override the filter step (s)")
-    parser.add_argument("--particles", type=positive_int, default=DEFAULT_PARTICLES,
-                        help=f"particles per particle filter (default {DEFAULT_PARTICLES})")
+    parser.add_argument("--particles", type=positive_int, default=N_PARTICLES,
+                        help=f"particles per particle filter (default {N_PARTICLES})")
     parser.add_argument("--filters", default=DEFAULT_FILTERS,
                         help=f"comma-separated short names (default {DEFAULT_FILTERS})")
     parser.add_argument("--conditions", default=",".join(CONDITIONS),

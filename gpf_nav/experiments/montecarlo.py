@@ -36,7 +36,8 @@ from gpf_nav.arguments import CommandParser, positive_float, positive_int
 from gpf_nav.experiments import metrics
 from gpf_nav.experiments.parallel import default_workers, map_tasks
 from gpf_nav import registry
-from gpf_nav.experiments.runner import DEFAULT_PARTICLES, FILTERS, RunTask, run_task, select_oracle
+from gpf_nav.experiments.runner import FILTERS, RunTask, run_task, select_oracle
+from gpf_nav.filters.interface import N_PARTICLES
 from gpf_nav.sim.scenario import CASES, ScenarioConfig
 
 SCHEMA = "gpf_nav.montecarlo/1"
@@ -72,8 +73,8 @@ def add_common_arguments(parser: argparse.ArgumentParser, runs: int) -> None:
     parser.add_argument("--duration", type=positive_float, default=None,
                         help="override the scenario duration (s); default 2400 s")
     parser.add_argument("--dt", type=positive_float, default=None, help="override the filter step (s); default 2 s")
-    parser.add_argument("--particles", type=positive_int, default=DEFAULT_PARTICLES,
-                        help=f"particles / ensemble members (default {DEFAULT_PARTICLES})")
+    parser.add_argument("--particles", type=positive_int, default=N_PARTICLES,
+                        help=f"particles / ensemble members (default {N_PARTICLES})")
     parser.add_argument("--filters", default=None,
                         help="comma-separated short names (default: gpf, ekf-comp, ekf-oracle, "
                              "ukf-oracle and the paper's seven rows gpf-paper, gpf-printed, gpf-exact, spf, "
@@ -313,7 +314,7 @@ def build_tasks(config: ScenarioConfig, cases, runs: int, seed: int, filters, n_
 
 
 def campaign(config: ScenarioConfig, cases=("full", "partial"), runs: int = 100, seed: int = 0,
-             filters=FILTERS, n_particles: int = DEFAULT_PARTICLES, divergence_km: float = 1000.0,
+             filters=FILTERS, n_particles: int = N_PARTICLES, divergence_km: float = 1000.0,
              workers: int | None = None, scheduler: str | None = None, progress: bool = True,
              series: bool = True) -> tuple[dict, dict]:
     """Run the campaign; returns ``(report without meta, per-step data for the figures)``."""

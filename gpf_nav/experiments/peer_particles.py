@@ -13,6 +13,7 @@ import importlib.util
 
 import numpy as np
 
+from gpf_nav.filters.interface import N_PARTICLES
 from gpf_nav.models.state_space import StateSpaceModel
 
 
@@ -25,7 +26,7 @@ class ParticlesBootstrap:
     """``particles.SMC`` on ``Bootstrap`` of ``model``, one ``predict(dt)`` + ``update(y)`` per step of the
     iterator (the step's ``dt`` is the first one predicted; ``particles`` models have one)."""
 
-    def __init__(self, model: StateSpaceModel, n_particles: int = 500, seed: int = 0):
+    def __init__(self, model: StateSpaceModel, n_particles: int = N_PARTICLES, seed: int = 0):
         self.model, self.n_particles, self.seed = model, int(n_particles), int(seed)
         self._data: list[np.ndarray] = []
         self._smc = None

@@ -22,14 +22,13 @@ import numpy as np
 
 from gpf_nav import registry
 from gpf_nav.experiments import metrics
-from gpf_nav.filters.interface import RESAMPLING
+from gpf_nav.filters.interface import N_PARTICLES, RESAMPLING
 from gpf_nav.integrity import ConsistencyMonitor, innovation_moments
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate, undetermined_subspace
 from gpf_nav.sim.surface_stations import scenario_stations
 from gpf_nav.sensors.model import ModelSensor
 from gpf_nav.sensors.sensor import Sensor
 
-DEFAULT_PARTICLES = 500
 DEFAULT_DIVERGENCE_BOUND = 1.0e6  # m: a run whose position error ever exceeds 1000 km has diverged
 NEES_BOUND = 22.458
 """chi-square 99.9 % bound of 6 degrees of freedom: a step whose NEES is above it is overconfident."""
@@ -129,7 +128,7 @@ class RunTask:
     seed: int
     config: ScenarioConfig
     filters: tuple[str, ...] = FILTERS
-    n_particles: int = DEFAULT_PARTICLES
+    n_particles: int = N_PARTICLES
     series: bool = False
     divergence_bound: float = DEFAULT_DIVERGENCE_BOUND
     tag: dict = field(default_factory=dict, compare=False, hash=False)

@@ -33,9 +33,10 @@ from gpf_nav.arguments import CommandParser, positive_float, positive_int
 from gpf_nav.experiments import metrics
 from gpf_nav.experiments.montecarlo import git_commit, parse_filters, write_json
 from gpf_nav.experiments.parallel import map_tasks
-from gpf_nav.experiments.runner import DEFAULT_PARTICLES, make_filter, run_seeds
+from gpf_nav.experiments.runner import make_filter, run_seeds
 from gpf_nav.filters import SensorBiasFilter
 from gpf_nav.filters.gating import OUTLIER_GATE_LIMIT
+from gpf_nav.filters.interface import N_PARTICLES
 from gpf_nav.models.lunar import MOON_RADIUS
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 from gpf_nav.sim.sensor_suite import SuiteConfig, SuiteData, generate_suite, suite_sensors
@@ -144,7 +145,7 @@ class SuiteTask:
     config: ScenarioConfig
     suite: SuiteConfig
     filters: tuple[str, ...] = DEFAULT_FILTERS
-    n_particles: int = DEFAULT_PARTICLES
+    n_particles: int = N_PARTICLES
     fix_gate: float = FIX_GATE
     range_bias_std: float = 0.0
 
@@ -220,7 +221,7 @@ def summarise(results: list[dict], filters: tuple[str, ...]) -> dict:
 
 
 def campaign(config: ScenarioConfig, suite: SuiteConfig, runs: int = 20, seed: int = 0,
-             filters: tuple[str, ...] = DEFAULT_FILTERS, n_particles: int = DEFAULT_PARTICLES,
+             filters: tuple[str, ...] = DEFAULT_FILTERS, n_particles: int = N_PARTICLES,
              workers: int | None = None, progress: bool = True, fix_gate: float = FIX_GATE,
              range_bias_std: float = 0.0) -> tuple[dict, dict]:
     """Run the campaign; returns ``(report, per-step data for the figure)``."""
@@ -325,8 +326,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workers", type=positive_int, default=None, help="worker processes (default: cores)")
     parser.add_argument("--duration", type=positive_float, default=None, help="run length, s (default 2400)")
     parser.add_argument("--case", default="full", help="scenario case of the rae data (full, partial, range)")
-    parser.add_argument("--particles", type=positive_int, default=DEFAULT_PARTICLES,
-                        help=f"particles / ensemble members (default {DEFAULT_PARTICLES})")
+    parser.add_argument("--particles", type=positive_int, default=N_PARTICLES,
+                        help=f"particles / ensemble members (default {N_PARTICLES})")
     parser.add_argument("--filters", default=None,
                         help="comma-separated filters, short names as montecarlo's (default gpf,ekf-comp-gated)")
     parser.add_argument("--suite", action="append", default=[], metavar="KEY=VALUE",

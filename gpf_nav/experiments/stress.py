@@ -47,8 +47,9 @@ from gpf_nav import registry
 from gpf_nav.arguments import CommandParser, positive_float, positive_int
 from gpf_nav.experiments.montecarlo import base_config, git_commit, parse_filters, run_metadata, write_json
 from gpf_nav.experiments.parallel import map_tasks
-from gpf_nav.experiments.runner import DEFAULT_PARTICLES, RunTask, run_task, select_oracle
+from gpf_nav.experiments.runner import RunTask, run_task, select_oracle
 from gpf_nav.experiments.surface import SURFACE
+from gpf_nav.filters.interface import N_PARTICLES
 from gpf_nav.sim.scenario import ScenarioConfig
 
 SCHEMA = "gpf_nav.stress/1"
@@ -239,8 +240,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="gravity mismatch of the truth in every condition (default 0: exact dynamics)")
     parser.add_argument("--duration", type=positive_float, default=None, help="override the duration (s)")
     parser.add_argument("--dt", type=positive_float, default=None, help="override the filter step (s)")
-    parser.add_argument("--particles", type=positive_int, default=DEFAULT_PARTICLES,
-                        help=f"particles per particle filter (default {DEFAULT_PARTICLES})")
+    parser.add_argument("--particles", type=positive_int, default=N_PARTICLES,
+                        help=f"particles per particle filter (default {N_PARTICLES})")
     parser.add_argument("--filters", default=DEFAULT_FILTERS,
                         help=f"comma-separated short names (default {DEFAULT_FILTERS}); known: "
                              + ", ".join(registry.short_names()))

@@ -21,6 +21,7 @@ import numpy as np
 from gpf_nav import registry
 from gpf_nav.experiments.parallel import map_tasks
 from gpf_nav.experiments.runner import run_filter, run_seeds
+from gpf_nav.filters.interface import N_PARTICLES
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 
 VARIANTS = {
@@ -72,7 +73,7 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="campaign seed (gpf-nav stress's, default 0)")
     parser.add_argument("--prior-km", type=float, default=20.0,
                         help="prior position sigma (km); the velocity sigma is the same number in m/s")
-    parser.add_argument("--particles", type=int, default=500)
+    parser.add_argument("--particles", type=int, default=N_PARTICLES)
     parser.add_argument("--duration", type=float, default=None, help="override the duration (s)")
     parser.add_argument("--workers", type=int, default=None)
     args = parser.parse_args(argv)

@@ -13,19 +13,19 @@ from typing import Callable
 
 import numpy as np
 
+from gpf_nav.filters.composite import Composite
 from gpf_nav.filters.interface import SENSOR_BIAS, Filter
-from gpf_nav.integrity.observability import ObservabilityReport
 from gpf_nav.models.state_space import StateSpaceModel
 from gpf_nav.sensors.sensor import Sensor
 from gpf_nav.sensors.bias import SensorBiasModel
 
 
-class SensorBiasFilter(Filter):
+class SensorBiasFilter(Composite):
     """A filter on the user's model augmented with the bias states of ``sensors``.
 
-    A :class:`~gpf_nav.filters.interface.Filter` whose state lives in :attr:`filter`: it does not run the
-    base class's initialisation, and it has the capabilities of :attr:`filter` (their attributes read
-    from it, on the augmented state) and :data:`~gpf_nav.filters.interface.SENSOR_BIAS`.
+    A :class:`~gpf_nav.filters.composite.Composite` of one member, :attr:`filter`: every capability but
+    :data:`~gpf_nav.filters.interface.SENSOR_BIAS` is the member's (its attributes on the augmented state,
+    e.g. particles ``(N, n + n_b)``); the sensor biases are its own.
 
     Args:
         build: builds the filter on a model, e.g. ``lambda m: GeometricProjectionPF(m, 500, seed=0)``.
@@ -38,110 +38,22 @@ class SensorBiasFilter(Filter):
         bias_model: the augmented model.
     """
 
+    own_capabilities = frozenset({SENSOR_BIAS})
+
     def __init__(self, build: Callable[[StateSpaceModel], Filter], model: StateSpaceModel,
                  sensors: list[Sensor]):
-        self.model = model
+        super().__init__(model)
         self.bias_model = SensorBiasModel(model, sensors)
         self.filter = build(self.bias_model)
 
-    # --- the interface, answered by the inner filter -------------------------------------------------
     @property
-    def time(self) -> float:
-        """Filter time, s."""
-        return self.filter.time
+    def members(self) -> tuple[Filter]:
+        """:attr:`filter`."""
+        return (self.filter,)
 
-    @property
-    def initialized(self) -> bool:
-        """Whether :meth:`initialize` has run."""
-        return self.filter.initialized
-
-    @property
-    def recoveries(self) -> int:
-        """Re-initialisations of :attr:`filter`."""
-        return self.filter.recoveries
-
-    @property
-    def last_recovery_reason(self) -> str | None:
-        """Why :attr:`filter` last re-initialised itself, or None."""
-        return self.filter.last_recovery_reason
-
-    @property
-    def observability(self) -> ObservabilityReport | None:
-        """The observability report of :attr:`filter` (its state includes the biases)."""
-        return self.filter.observability
-
-    def observability_trackers(self):
-        return self.filter.observability_trackers()
-
-    @property
-    def particles(self) -> np.ndarray | None:
-        """Particles ``(N, n + n_b)`` of :attr:`filter`, biases included."""
-        return self.filter.particles
-
-    @property
-    def weights(self) -> np.ndarray | None:
-        """Their weights ``(N,)``."""
-        return self.filter.weights
-
-    @property
-    def ess(self) -> float | None:
-        """ESS/N of :attr:`filter`."""
-        return self.filter.ess
-
-    @property
-    def resampled(self) -> bool:
-        """Whether :attr:`filter` resampled at the last update."""
-        return self.filter.resampled
-
-    @property
-    def resample_count(self) -> int:
-        """Resamplings of :attr:`filter`."""
-        return self.filter.resample_count
-
-    @property
-    def costate_mean(self) -> np.ndarray | None:
-        """Mean co-state ``(m,)`` of :attr:`filter`."""
-        return self.filter.costate_mean
-
-    @property
-    def costate_measured(self) -> np.ndarray | None:
-        """Components ``(m,)`` its last co-state covers."""
-        return self.filter.costate_measured
-
-    @property
-    def costate_norm_mean(self) -> float | None:
-        """Weighted mean co-state norm of :attr:`filter`."""
-        return self.filter.costate_norm_mean
-
-    @property
-    def costate_norm_max(self) -> float | None:
-        """Largest co-state norm of :attr:`filter`."""
-        return self.filter.costate_norm_max
-
-    @property
-    def gated(self) -> int:
-        """Components refused by the gate of :attr:`filter`."""
-        return self.filter.gated
-
-    @property
-    def tempered_updates(self) -> int:
-        """Tempered updates of :attr:`filter`."""
-        return self.filter.tempered_updates
-
-    @property
-    def model_probabilities(self) -> np.ndarray | None:
-        """Model probabilities ``(2,)`` of :attr:`filter`."""
-        return self.filter.model_probabilities
-
-    @property
-    def unmodelled_acceleration(self) -> np.ndarray:
-        """Unmodelled acceleration ``(p,)`` of :attr:`filter`."""
-        return self.filter.unmodelled_acceleration
-
-    @property
-    def unmodelled_acceleration_covariance(self) -> np.ndarray:
-        """Its covariance ``(p, p)``."""
-        return self.filter.unmodelled_acceleration_covariance
+    def delegate(self, capability: str) -> Filter:
+        """:attr:`filter` answers every capability but the sensor biases."""
+        return self.filter
 
     def initialize(self, mean, cov, t0: float = 0.0) -> None:
         """Start from the user's prior ``N(mean (n,), cov (n, n))``, biases from ``N(0, std^2)``; an
@@ -183,11 +95,6 @@ class SensorBiasFilter(Filter):
         """Its covariance ``(n, n)``."""
         n = self.model.state_dim
         return self.augmented_covariance[:n, :n]
-
-    @property
-    def capabilities(self) -> frozenset[str]:
-        """:attr:`filter`'s, and :data:`~gpf_nav.filters.interface.SENSOR_BIAS`."""
-        return self.filter.capabilities | {SENSOR_BIAS}
 
     @property
     def sensor_names(self) -> tuple[str, ...]:

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpf_nav.filters.interface import CLOUD, Filter
+from gpf_nav.filters.interface import CLOUD, N_PARTICLES, Filter
 from gpf_nav.filters.kalman import ModelNoise, innovation_solve, readonly_view
 from gpf_nav.linalg import positive_definite, psd_sqrt
 from gpf_nav.models.state_space import StateSpaceModel
@@ -28,7 +28,7 @@ class EnsembleKF(Filter):
             rows at the last update; 0.0 when nothing was measured.
     """
 
-    def __init__(self, model: StateSpaceModel, n_particles: int = 500,
+    def __init__(self, model: StateSpaceModel, n_particles: int = N_PARTICLES,
                  seed: int | np.random.Generator | None = None):
         if int(n_particles) < 2:
             raise ValueError(f"n_particles must be at least 2, got {n_particles}")

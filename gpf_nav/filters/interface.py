@@ -46,6 +46,21 @@ SENSOR_BIAS = "sensor_bias"
 """Sensor-bias states: ``sensor_names`` (the biased sensors) and ``sensor_bias(name)``."""
 CAPABILITIES = (CLOUD, RESAMPLING, COSTATE, GATE, TEMPERING, MODEL_PROBABILITIES, COMPENSATION, SENSOR_BIAS)
 """Every optional capability a filter may declare in :attr:`Filter.capabilities`."""
+ATTRIBUTES: dict[str, tuple[str, ...]] = {
+    CLOUD: ("particles", "weights"),
+    RESAMPLING: ("ess", "resampled", "resample_count"),
+    COSTATE: ("costate_mean", "costate_measured", "costate_norm_mean", "costate_norm_max"),
+    GATE: ("gated",),
+    TEMPERING: ("tempered_updates",),
+    MODEL_PROBABILITIES: ("model_probabilities",),
+    COMPENSATION: ("unmodelled_acceleration", "unmodelled_acceleration_covariance"),
+    SENSOR_BIAS: ("sensor_names", "sensor_bias", "predicted_estimate"),
+}
+"""The attributes and methods of :class:`Filter` that answer each capability (what a composite filter,
+:mod:`gpf_nav.filters.composite`, reads from the member that answers it)."""
+
+N_PARTICLES = 500
+"""Default number of particles or ensemble members of the filters that have a :data:`CLOUD`."""
 
 _EMPTY_VECTOR = np.zeros(0)
 _EMPTY_VECTOR.flags.writeable = False
@@ -115,6 +130,13 @@ class Filter(ABC):
         """``(estimated bias (m,), its std (m,))`` of sensor ``name`` (:data:`SENSOR_BIAS`); KeyError when
         the filter estimates no bias of ``name``."""
         raise KeyError(f"{type(self).__name__} estimates no bias of sensor {name!r}")
+
+    def predicted_estimate(self, sensor: Sensor) -> tuple[Sensor, np.ndarray, np.ndarray]:
+        """What an innovation test of ``sensor`` needs: the sensor on the state the filter estimates, that
+        state's mean and covariance (:data:`SENSOR_BIAS`: the augmented state, so that the sensor's estimated
+        bias is subtracted and its uncertainty counted). Without the capability ``(sensor, mean (n,),
+        covariance (n, n))``."""
+        return sensor, self.mean, self.covariance
 
     def __init__(self, model: StateSpaceModel, seed: int | np.random.Generator | None = None):
         self.model = model

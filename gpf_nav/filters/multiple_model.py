@@ -23,9 +23,7 @@ Each cycle is Blom's interacting multiple model (IMM):
    compensated members are not mixed: each model contains the nominal one (``a = 0`` is a state it can
    be in), so a switch to the nominal model needs no hand-over. Mixing them too (Blom's symmetric IMM)
    resets their acceleration towards the compensation's prior whenever the nominal model is the more
-   probable, so a small, slowly observable force is never learnt: with an unmodelled 0.02 m/s^2
-   along-track force and no azimuth the symmetric IMM was 3.1 km and NEES 17 against 1.2 km and NEES 6
-   for one compensated GPF (20 runs).
+   probable, so a small, slowly observable force is never learnt.
 2. Each member predicts and updates on its own model.
 3. **Model probabilities** ``mu_j ∝ c_j p(y | j)``, ``p(y | j)`` the member's incremental evidence
    (:attr:`ParticleFilter.log_likelihood`, exact for the GPF's corrected weights). When the members
@@ -55,8 +53,9 @@ from scipy.stats import chi2
 
 from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME
 from gpf_nav.filters.gpf import GeometricProjectionPF
+from gpf_nav.filters.composite import Composite
 from gpf_nav.filters.interface import (CLOUD, COMPENSATION, COSTATE, GATE, MODEL_PROBABILITIES, RESAMPLING,
-                                       TEMPERING, Filter)
+                                       TEMPERING, N_PARTICLES)
 from gpf_nav.filters.model_averaging import mixture_moments
 from gpf_nav.linalg import positive_definite
 from gpf_nav.models.state_space import StateSpaceModel
@@ -80,12 +79,13 @@ cannot see a direction (no azimuth) a small, fast member explains the error left
 state and wins the evidence."""
 
 
-class MultipleModelGPF(Filter):
+class MultipleModelGPF(Composite):
     """IMM over a nominal and compensated :class:`GeometricProjectionPF` members (module docstring).
 
-    A :class:`~gpf_nav.filters.interface.Filter` whose state lives in its members: it keeps no cloud of
-    its own, so it does not run the base class's initialisation, and it answers every capability of
-    the interface from them (the estimate and the particle diagnostics model-averaged).
+    A :class:`~gpf_nav.filters.composite.Composite` whose principal member is :attr:`compensated`: the
+    co-state is that member's (:meth:`delegate`); the estimate, the particle diagnostics and the
+    unmodelled acceleration are model averages over the members, the gate's and tempering's counts
+    their sums.
 
     Args:
         model: the user's state-space model.
@@ -111,7 +111,7 @@ class MultipleModelGPF(Filter):
         model_probabilities: ``(K,)`` probabilities of the nominal model, then of :attr:`scaled`'s.
     """
 
-    def __init__(self, model: StateSpaceModel, n_particles: int = 500, switch_time: float = SWITCH_TIME,
+    def __init__(self, model: StateSpaceModel, n_particles: int = N_PARTICLES, switch_time: float = SWITCH_TIME,
                  seed: int | np.random.Generator | None = None,
                  compensation_scales: tuple[float, ...] = COMPENSATION_SCALES,
                  compensation_times: tuple[float, ...] = COMPENSATION_TIMES,
@@ -126,6 +126,7 @@ class MultipleModelGPF(Filter):
             raise ValueError(f"compensation_times must be positive, one per scale, the last 1; got {compensation_times}")
         if not 0.0 <= nesting_gate < 1.0:
             raise ValueError(f"nesting_gate must lie in [0, 1), got {nesting_gate}")
+        super().__init__(model)
         sigma = options.pop("unmodelled_acceleration_std", UNMODELLED_ACCELERATION_STD)
         tau = options.pop("unmodelled_acceleration_time", UNMODELLED_ACCELERATION_TIME)
         if not sigma > 0.0:
@@ -147,23 +148,25 @@ class MultipleModelGPF(Filter):
         self.nesting_gate = float(nesting_gate)
         self._nesting_limit = float(chi2.ppf(nesting_gate, model.state_dim)) if nesting_gate else math.inf
         self.compensation_scales, self.compensation_times = scales, times
-        self.model = model
         self.switch_time = float(switch_time)
         self.model_probabilities = np.full(len(self.members), 1.0 / len(self.members))
         self._predicted_probabilities = self.model_probabilities
         self._mix_due = False
         self._moments = None
 
-    @property
-    def members(self) -> tuple[GeometricProjectionPF, ...]:
-        """The nominal member, then the compensated ones by increasing scale."""
-        return (self.nominal, *self.scaled)
+    own_capabilities = frozenset({CLOUD, RESAMPLING, GATE, TEMPERING, MODEL_PROBABILITIES, COMPENSATION})
 
     @property
-    def capabilities(self) -> frozenset[str]:
-        """Its members' (a cloud, resampling, a co-state, a gate, tempering, the compensation) and the
-        model probabilities."""
-        return frozenset({CLOUD, RESAMPLING, COSTATE, GATE, TEMPERING, MODEL_PROBABILITIES, COMPENSATION})
+    def members(self) -> tuple[GeometricProjectionPF, ...]:
+        """The nominal member, then the compensated ones by increasing scale (the principal,
+        :attr:`compensated`, last)."""
+        return (self.nominal, *self.scaled)
+
+    def delegate(self, capability: str) -> GeometricProjectionPF | None:
+        """:attr:`compensated` answers the co-state: the co-state of the model that contains the others
+        measures what no model explains (the integrity monitor tests its mean); a probability-weighted
+        mix of the members' co-states is not stationary while the probabilities move."""
+        return self.compensated if capability == COSTATE else None
 
     # --- the filter interface ------------------------------------------------------------------------
     def initialize(self, mean, cov, t0: float = 0.0) -> None:
@@ -229,18 +232,6 @@ class MultipleModelGPF(Filter):
 
     # --- the estimate --------------------------------------------------------------------------------
     @property
-    def time(self) -> float:
-        return self.compensated.time
-
-    @property
-    def initialized(self) -> bool:
-        return self.compensated.initialized
-
-    @property
-    def recoveries(self) -> int:
-        return sum(m.recoveries for m in self.members)
-
-    @property
     def mean(self) -> np.ndarray:
         return self._mixture()[0]
 
@@ -266,9 +257,6 @@ class MultipleModelGPF(Filter):
         """The nominal member's :class:`~gpf_nav.integrity.observability.ObservabilityReport`: what the
         data determined of the user's state (the compensated members' also count their accelerations)."""
         return self.nominal.observability
-
-    def observability_trackers(self):
-        return tuple(tracker for member in self.members for tracker in member.observability_trackers())
 
     def _accelerations(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """Each model's unmodelled acceleration ``(p,)`` and covariance ``(p, p)`` (the nominal's zero)."""
@@ -305,34 +293,6 @@ class MultipleModelGPF(Filter):
         return float(sum(mu * m.ess for mu, m in zip(self.model_probabilities, self.members)))
 
     @property
-    def costate(self) -> np.ndarray:
-        """The widest compensated member's per-particle co-state ``(N, m)``: the co-state of the model that
-        contains the others, so it measures what no model explains (the integrity monitor tests
-        its mean; a probability-weighted mix of the two members' co-states is not stationary while the
-        probabilities move, and its false-alarm rate at a set 1e-3 was 1.8e-3)."""
-        return self.compensated.costate
-
-    @property
-    def costate_norm_mean(self) -> float:
-        """The compensated member's weighted mean co-state norm."""
-        return self.compensated.costate_norm_mean
-
-    @property
-    def costate_mean(self) -> np.ndarray:
-        """The compensated member's weighted mean co-state ``(m,)`` (what the integrity monitor tests)."""
-        return self.compensated.costate_mean
-
-    @property
-    def costate_measured(self) -> np.ndarray:
-        """Components ``(m,)`` bool the compensated member's last co-state covers."""
-        return self.compensated.costate_measured
-
-    @property
-    def costate_norm_max(self) -> float:
-        """The compensated member's largest per-particle co-state norm."""
-        return self.compensated.costate_norm_max
-
-    @property
     def resampled(self) -> bool:
         """Whether any member resampled at the last update."""
         return any(m.resampled for m in self.members)
@@ -343,11 +303,6 @@ class MultipleModelGPF(Filter):
         return sum(m.resample_count for m in self.members)
 
     @property
-    def reference(self) -> str:
-        """The members' innovation reference (``innovation`` or ``increment``)."""
-        return self.nominal.reference
-
-    @property
     def tempered_updates(self) -> int:
         """Updates a member split into tempering stages, every member."""
         return sum(m.tempered_updates for m in self.members)
@@ -356,9 +311,3 @@ class MultipleModelGPF(Filter):
     def gated(self) -> int:
         """Measurement components refused by the innovation gate, every member."""
         return sum(m.gated for m in self.members)
-
-    @property
-    def last_recovery_reason(self) -> str | None:
-        """Why a member last re-initialised itself (the widest first), or None."""
-        return next((m.last_recovery_reason for m in (*self.scaled[::-1], self.nominal)
-                     if m.last_recovery_reason), None)

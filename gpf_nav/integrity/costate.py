@@ -183,7 +183,7 @@ class CostateMonitor:
     not inflate the scale it is measured against: a persistent fault stays ``FAULT``, and a transient one
     does not blind the monitor afterwards. The quarantine threshold is far below the FAULT one on
     purpose: quarantining every FAULT would keep the most extreme H0 windows out of the reference,
-    shrink its spread and double the false-alarm rate at ``1e-3`` (measured). The monitor is ready after
+    shrink its spread and raise the false-alarm rate above ``false_alarm_rate``. The monitor is ready after
     ``(min_reference + 1) * (window + gap)`` accepted samples (defaults: 84, i.e. 168 s at the lunar
     scenario's 2 s step) and remembers at most ``(reference + 2) * (window + gap)`` (264, 528 s).
     """

@@ -104,8 +104,8 @@ class ObservabilityTracker:
     than :data:`REANCHOR_SIGMAS` standard deviations of the no-data prediction away), or is not finite.
     The move rebuilds both recursions from the prior along the model's trajectory through the new
     reference (carried back through the logged predictions): a reference that jumped would turn the
-    carried information against the new Jacobians, like a moving mean (with the 9 % gravity error of
-    Case 2, three moves gave the polar rotation, which no measurement sees, an information of 3).
+    carried information against the new Jacobians, like a moving mean, and give information to a
+    direction no measurement sees.
 
     Args:
         model: the filter's state-space model (its own state: augmented, if the filter augments it).

@@ -11,16 +11,15 @@ on disk (``__pycache__``, or numba's user cache where that is not writable): a f
 compilation once. A user's own model's methods stay its numpy; the machinery around them (the
 residual's angle wrapping, the flattened update's departures and tests) runs here for every model.
 
-What made them fast, measured on a 2-core machine: loops over a block of :data:`CHUNK` particles that
-vectorise, one per function (inlined together with a branchy loop, the frames' loop stayed scalar),
-indexing rows through views (an index ``start + t`` gets numba's negative-index check, which kept loops
-scalar), no sum of floats or short-circuit across particles; the lunar flow runs each sub-step over the
-whole block (5 times faster than particle by particle). The products of a small matrix with the whole
-cloud (the GPF's proposal draw, the moment map) stay BLAS calls: kernels written for them were 1.1 to 2
-times slower. The per-particle kernels run on every core from :data:`PARALLEL` particles, with the
-serial loop's arithmetic (bit for bit); below it they stay serial: next to two busy processes the
-parallel flow was 4 times slower at N = 500 and 1.6 times at 10 000, and 1.7 times faster at 100 000.
-The moments stay serial at every N (in parallel they were never faster, and up to 8 times slower).
+What makes them fast: loops over a block of :data:`CHUNK` particles that vectorise, one per function
+(inlined together with a branchy loop, a loop stays scalar), rows indexed through views (an index
+``start + t`` gets numba's negative-index check, which keeps loops scalar), no sum of floats or
+short-circuit across particles; the lunar flow runs each sub-step over the whole block rather than
+particle by particle. The products of a small matrix with the whole cloud (the GPF's proposal draw, the
+moment map) stay BLAS calls, which a loop does not beat. The per-particle kernels run on every core from
+:data:`PARALLEL` particles, with the serial loop's arithmetic (bit for bit); below it, on a machine
+busy with other processes, the threads cost more than they save. The moments stay serial at every N:
+threads do not make them faster.
 """
 
 CHUNK = 256

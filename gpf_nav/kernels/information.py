@@ -3,7 +3,7 @@
 form), and the report's information and directions.
 
 Every filter runs the tracker at each predict and update; on matrices of 6 to 9 rows numpy's per-call
-overhead was the whole cost (about a third of the default GPF's step at N = 500). The operations are the
+overhead would be the whole cost. The operations are the
 numpy code's (``test/numpy_reference.py``), in loops: the results are equal to rounding. The small solves
 are Gaussian elimination with partial pivoting and the factorisations Cholesky, failing where LAPACK's do
 (an exactly zero pivot; a pivot that is not positive), so the tracker refuses the same steps; the SVD and

@@ -17,13 +17,14 @@ import numpy as np
 
 from gpf_nav.arguments import CommandParser, positive_float, positive_int
 from gpf_nav.estimator.factory import FILTERS, make_filter
+from gpf_nav.filters.interface import N_PARTICLES
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model
 
 
 def _parser() -> CommandParser:
     ap = CommandParser(prog="gpf-nav demo", description=__doc__.split("\n\n")[0])
     ap.add_argument("--filter", default="gpf", choices=FILTERS, help=" | ".join(FILTERS) + " (default gpf)")
-    ap.add_argument("--particles", type=positive_int, default=500, help="N (default 500)")
+    ap.add_argument("--particles", type=positive_int, default=N_PARTICLES, help=f"N (default {N_PARTICLES})")
     ap.add_argument("--duration", type=positive_float, default=300.0, help="simulated seconds (default 300)")
     ap.add_argument("--rate-factor", type=positive_float, default=20.0, help="simulated s per wall s (default 20)")
     ap.add_argument("--seed", type=int, default=0, help="scenario seed (default 0)")

@@ -25,6 +25,7 @@ import numpy as np
 
 from gpf_nav.estimator.engine import EngineConfig, EstimatorEngine
 from gpf_nav.estimator.factory import make_filter
+from gpf_nav.filters.interface import N_PARTICLES
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 
 S = 1_000_000_000
@@ -77,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m gpf_nav.tools.fault_policy", description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--k", type=int, nargs="+", default=[3, 10, 30], help="fault_updates values")
-    ap.add_argument("--particles", type=int, default=500)
+    ap.add_argument("--particles", type=int, default=N_PARTICLES)
     ap.add_argument("--duration", type=float, default=1200.0, help="simulated s (default 1200)")
     ap.add_argument("--event", type=float, default=400.0, help="simulated s of the fault (default 400)")
     ap.add_argument("--shift", type=int, default=3, help="jump: measurement steps back (default 3, 6 s)")

@@ -76,6 +76,7 @@ import numpy as np
 
 from gpf_nav.estimator.input_checks import REASONS, ReapplyBudget
 from gpf_nav.estimator.params import BY_NAME
+from gpf_nav.filters.interface import N_PARTICLES
 
 NS = 1_000_000_000
 RAW_TOPIC = "soak/raw/rae"
@@ -104,7 +105,7 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--rate-factor", type=float, default=10.0, help="simulated s per wall s (default 10)")
     ap.add_argument("--seed", type=int, default=0, help="injector and scenario seed (default 0)")
     ap.add_argument("--filter", default="gpf", help="estimator filter (default gpf)")
-    ap.add_argument("--particles", type=int, default=500, help="N (default 500)")
+    ap.add_argument("--particles", type=int, default=N_PARTICLES, help=f"N (default {N_PARTICLES})")
     ap.add_argument("--epsilon", type=float, default=0.0,
                     help="scenario gravity mismatch (default 0: a consistent model, so an integrity alarm "
                          "would come from the injected disorder; 0.09 is the simulator's default)")
