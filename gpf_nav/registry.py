@@ -200,9 +200,10 @@ for _entry in (
                 GPF_OPTIONS | {"nominal_prior"}, node=True,
                 description="one navigation-grade GPF on the compensated model, averaged with the nominal "
                             "hypothesis by Savage-Dickey"),
-    FilterEntry("gpf-mean", "GPF navigation, mean-linearised update", _gpf, "gpf",
-                GPF_OPTIONS | MEMBER_OPTIONS,
-                description="gpf with the measurement linearised once at each member's mean (linearization "
+    FilterEntry("gpf-mean", "GPF navigation, mean-linearised update",
+                lambda model, n_particles, seed, **options: _gpf(model, n_particles, seed, **{**options, **ONE_MEMBER}),
+                "gpf", GPF_OPTIONS | {"switch_time"},
+                description="gpf-pair with the measurement linearised once at each member's mean (linearization "
                             "mean; it narrows what the data cannot see)"),
     FilterEntry("gpf-qmetric", "GPF Q-metric (innovation, corrected, eps=1)",
                 _gpf_variant(reference="innovation", weighting="corrected", metric="process_noise",
