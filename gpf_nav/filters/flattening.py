@@ -102,6 +102,11 @@ class Flattening:
                       np.ascontiguousarray(jacobian), nu, lag * m)
         return nu if self.rows.all() else nu[:, np.tile(self.rows, 1 + lags)]
 
+    def residual(self, y: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """``y - h(x)`` ``(m, N)`` of the particles ``x`` ``(n, N)`` for the measurement linearised at the mean,
+        the exact residual in the flattened coordinates (angles wrapped)."""
+        return self.sensor.residual(y, self.measured)[:, None] - self.jacobian @ (x - self.mean[:, None])
+
     def unflatten(self, xi: np.ndarray) -> np.ndarray:
         """The particles ``x`` ``(n, N)`` whose flattened coordinates are ``xi`` ``(n, N)``: fixed-point steps
         ``x <- xi - K nu(x)`` until the curvature changes by less than :data:`NEGLIGIBLE` (at most
