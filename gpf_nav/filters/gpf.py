@@ -72,8 +72,9 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
     unmodelled-acceleration compensation). The paper's filter is
     ``GeometricProjectionPF(model, metric="euclidean", weighting="likelihood", unmodelled_acceleration_std=0)``.
     The default estimator is not this class but :class:`~gpf_nav.filters.multiple_model.MultipleModelGPF`
-    (``make_filter("gpf", model)``: a nominal and compensated members of this class): alone, the compensated filter can invent an
-    unobservable acceleration and diverge, e.g. with range only (docs/filters.md, *Robust by construction*).
+    (``make_filter("gpf", model)``: a nominal member and compensated members of this class): alone, the
+    compensated filter can invent an unobservable acceleration and diverge, e.g. with range only
+    (docs/filters.md, *Robust by construction*).
 
     With compensation on, the filter runs on ``ModelErrorCompensation(model)``: :attr:`model` is that
     augmented model, :attr:`particles` are augmented ``(N, n + p)``, but :meth:`initialize` takes the
@@ -108,9 +109,9 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
             mixture of proposals after each update (and back after a resampling); False leaves the
             sampled moments (for comparison: docs/filters.md).
         tempering_ess: cloud metric: likelihood tempering below this ESS/N
-            (:mod:`gpf_nav.filters.tempering`; the kernel of the cloud metric moves the particles between
-            stages); default :data:`TEMPERING_ESS`, 0 turns it off. The other metrics have no move
-            between stages and take 0 only.
+            (:mod:`gpf_nav.filters.tempering_schedule`; the kernel of the cloud metric moves the
+            particles between stages); default :data:`TEMPERING_ESS`, 0 turns it off. The other metrics
+            have no move between stages and take 0 only.
         observability_constraint: the update keeps the prediction along the directions the data carried
             less information about than this fraction of the prior's (:class:`ParticleFilter`); default
             :data:`OBSERVABILITY_CONSTRAINT` for the cloud metric, 0 (off) for the others.

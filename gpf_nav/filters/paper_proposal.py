@@ -69,8 +69,9 @@ class ProjectionProposal(Proposal):
         shift, a = project(H, r, pf._whitening(projected, stage.fraction)[0], self.regularization,
                            metric_factor, sensor.measured_state_index, sensor.orthogonal_jacobian_rows)
         x += shift
-        correction = 0.0 if self.weighting == "likelihood" else gaussian_shift_correction(shift, inverse_factor, z)
-        return Move(x, correction, rows, a / dt, projected)
+        if self.weighting == "likelihood":
+            return Move(x, 0.0, rows, a / dt, projected)
+        return Move(x, gaussian_shift_correction(shift, inverse_factor, z), rows, a / dt, projected)
 
     def reset(self) -> None:
         self._previous_y = {}

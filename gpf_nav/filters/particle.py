@@ -21,8 +21,6 @@ includes the pending ``Q``.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from gpf_nav import resampling as resamplers
@@ -32,7 +30,7 @@ from gpf_nav.filters.interface import CLOUD, COSTATE, RESAMPLING, TEMPERING, Fil
 from gpf_nav.filters.kernel import map_moments, weighted_moments
 from gpf_nav.filters.likelihood import Whitening, log_likelihood
 from gpf_nav.filters.proposal import PriorProposal, Proposal, Stage
-from gpf_nav.filters.tempering import Tempering
+from gpf_nav.filters.tempering_schedule import Tempering
 from gpf_nav.kernels import cloud
 from gpf_nav.linalg import cholesky_or_none, positive_definite, psd_sqrt
 from gpf_nav.models.state_space import StateSpaceModel
@@ -59,7 +57,7 @@ class ParticleFilter(Filter):
         tempering_ess: likelihood tempering (progressive correction): a draw whose ESS/N would fall
             below this is refused, and the update is split into stages, each weighting by a fraction of
             the log-likelihood, ``p(y | x)^f``, with a resampling and a new proposal from the cloud
-            between them (:mod:`gpf_nav.filters.tempering`); 0 (default) updates in one stage.
+            between them (:mod:`gpf_nav.filters.tempering_schedule`); 0 (default) updates in one stage.
         observability_constraint: an update keeps the prediction's conditional along the directions
             about which the data carried less information than this fraction of the prior's
             (:mod:`gpf_nav.filters.constraint`, :mod:`gpf_nav.integrity.observability`); 0 (default) does not.
@@ -271,8 +269,8 @@ class ParticleFilter(Filter):
         ``flat``: the update's flattened coordinates, or None. Returns ``(log-evidence, the rows used)``,
         the evidence None when the filter had to re-initialise.
 
-        With ``tempering_ess`` the likelihood comes in stages (:mod:`gpf_nav.filters.tempering`): a draw
-        that would leave too few effective particles is refused and drawn again with less of it. The
+        With ``tempering_ess`` the likelihood comes in stages (:mod:`gpf_nav.filters.tempering_schedule`):
+        a draw that would leave too few effective particles is refused and drawn again with less of it. The
         innovation gate and the co-state are those of the first draw (the whole likelihood, from the
         predicted cloud); the evidence is the sum of the stages'."""
         schedule = Tempering(self.tempering_ess)
@@ -435,7 +433,8 @@ class ParticleFilter(Filter):
 
     def _whitening(self, rows: np.ndarray, fraction: float = 1.0) -> tuple[np.ndarray, float]:
         """``(W, log of the Gaussian normalising constant)`` of the measured ``rows`` ``(m,)`` for the
-        likelihood ``p(y | x)^fraction`` of the sensor in use (:class:`~gpf_nav.filters.likelihood.Whitening`)."""
+        likelihood ``p(y | x)^fraction`` of the sensor in use
+        (:class:`~gpf_nav.filters.likelihood.Whitening`)."""
         return self._whiteners.of(rows, fraction)
 
     def _log_likelihood(self, x: np.ndarray, y: np.ndarray, rows: np.ndarray, fraction: float,
