@@ -83,7 +83,7 @@ def test_the_flattened_gpf_widens_its_kernel_while_an_update_is_in_trouble():
     model = filter_model(config)
     flt = GeometricProjectionPF(model, 500, seed=filter_seed, linearization="flattened")
     assert flt.kernel_bandwidth == optimal_bandwidth(500, flt.model.state_dim)
-    assert flt._troubled_bandwidth == default_bandwidth(500, flt.model.state_dim) > flt.kernel_bandwidth
+    assert flt.proposal.troubled_bandwidth == default_bandwidth(500, flt.model.state_dim) > flt.kernel_bandwidth
     flt.initialize(scenario.prior_mean, scenario.prior_cov)
     for k in range(scenario.times.size):
         flt.predict(config.dt, scenario.specific_force[k])
@@ -163,9 +163,9 @@ def test_the_flattened_coordinates_move_the_users_states_only():
     mean, cov = biased.augment_prior(scenario.prior_mean, scenario.prior_cov)
     flt.initialize(mean, cov)
     flt.predict(config.dt)
-    flt._begin_update(np.array([True, False, False]))
-    assert flt._flat is not None
-    assert np.abs(flt._flat.gain[:6]).max() > 0.0 and not flt._flat.gain[6:].any()
+    flat = flt.proposal.flatten(flt, np.array([True, False, False]))
+    assert flat is not None
+    assert np.abs(flat.gain[:6]).max() > 0.0 and not flat.gain[6:].any()
 
 
 def _soak_cloud():

@@ -129,7 +129,7 @@ def test_gpf_recovery_inside_an_update_leaves_no_proposal_behind():
     f = GeometricProjectionPF(LunarDescentModel(), n_particles=300, seed=3)
     truth = run_lunar(f, steps=5)
     y = f.model.measure(truth[None])[0]
-    f._log_likelihood = lambda x, y, rows: np.full(x.shape[1], np.nan)  # every weight NaN: a recovery
+    f._log_likelihood = lambda x, *rest: np.full(x.shape[1], np.nan)  # every weight NaN: a recovery
     f.predict(2.0)
     f.update(y)
     del f._log_likelihood

@@ -3,9 +3,9 @@
 The cloud-metric update of :class:`~gpf_nav.filters.gpf.GeometricProjectionPF` draws its kernel along
 straight lines, gives every particle one gain and weights it exactly: all three are right for a linear
 measurement. A measurement curved in the state's coordinates (a range about a centre) breaks them along
-the directions it cannot see: a particle 20 km along a rotation about the centre, moved by a straight
-kernel draw, lands 109 m (3.6 range sigmas) off the shell of its range, is weighted down, and the cloud
-narrows where the data never looked (issue 23). The update therefore runs in the coordinates
+the directions it cannot see: a particle far along a rotation about the centre, moved by a straight
+kernel draw, lands off the shell of its range, is weighted down, and the cloud narrows where the data
+never looked. The update therefore runs in the coordinates
 
     xi = x + K nu(x),      nu(x) = g(x) - g(m) - J (x - m),
 
@@ -47,11 +47,7 @@ MOVE_LIMIT = 100.0
 """Largest move, in the cloud's standard deviations along it, that a direction of the rows ahead may give a
 particle. A direction they barely see (a singular value just above :data:`RANK_TOLERANCE`) turns a
 curvature of a fraction of the noise into a move far beyond the cloud, and the map back then runs away
-instead of converging (an angles-only update of the compensated GPF moved particles 9e4 cloud deviations
-and published a position sigma of 2e11 m). Such directions are dropped like those below the tolerance.
-On the lunar descent's honesty conditions (6 runs each) the moves kept reach 16 deviations (large prior,
-range only); with range only and the 9 % mismatch 421 of 14 400 flattenings drop a direction (moves up
-to 1e7 deviations)."""
+instead of converging. Such directions are dropped like those below the tolerance."""
 _NONE = np.zeros((0, 0))
 """No previous curvature (:func:`~gpf_nav.kernels.curvature.largest_scaled`)."""
 
@@ -101,6 +97,11 @@ class Flattening:
             departure(sensor.residual(sensor.measure(states, t), measured[None]), x, self.mean,
                       np.ascontiguousarray(jacobian), nu, lag * m)
         return nu if self.rows.all() else nu[:, np.tile(self.rows, 1 + lags)]
+
+    def residual(self, y: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """``y - h(x)`` ``(m, N)`` of the particles ``x`` ``(n, N)`` for the measurement linearised at the mean,
+        the exact residual in the flattened coordinates (angles wrapped)."""
+        return self.sensor.residual(y, self.measured)[:, None] - self.jacobian @ (x - self.mean[:, None])
 
     def unflatten(self, xi: np.ndarray) -> np.ndarray:
         """The particles ``x`` ``(n, N)`` whose flattened coordinates are ``xi`` ``(n, N)``: fixed-point steps

@@ -16,10 +16,15 @@ less. With the mean-linearised update the Gaussian-optimal ``h`` leaves the cova
 measurements see little (its draws along a curved measurement's level set land off it and are weighted
 down), and 1.6 times it made up for part of that. The flattened update does not lose that spread and
 uses the optimal ``h``, and the wider one only while an update is in trouble (docs/filters.md).
+
+Moment matching (:class:`ProposalMixture`): the particles of the GPF's cloud proposal are exact draws of
+a mixture of Gaussian proposals whose weighted mean and covariance are known exactly; after weighting,
+the cloud is moved to them by an affine map, which replaces the sampling noise of its moments.
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -104,3 +109,55 @@ def map_moments(x: np.ndarray, current_mean: np.ndarray, current: np.ndarray, me
     out = (target @ triangular_inverse(source)) @ (x - current_mean[:, None])  # (BLAS: faster than a kernel)
     out += np.asarray(mean, dtype=float)[:, None]
     return out
+
+
+@dataclass(frozen=True)
+class MixtureMoments:
+    """The exact ``mean`` ``(n,)`` and ``cov`` ``(n, n)`` of a weighted mixture of proposals, and the
+    ``sampled_mean`` and ``sampled_cov`` of its weighted particles (:meth:`ProposalMixture.moments`)."""
+
+    mean: np.ndarray
+    cov: np.ndarray
+    sampled_mean: np.ndarray
+    sampled_cov: np.ndarray
+
+    def match(self, x: np.ndarray) -> np.ndarray:
+        """The weighted particles ``x`` ``(n, N)`` mapped to the exact moments (``x`` itself when the map
+        does not exist)."""
+        matched = map_moments(x, self.sampled_mean, self.sampled_cov, self.mean, self.cov, symmetric=True)
+        return x if matched is None else matched
+
+    def match_resampled(self, resampled: np.ndarray, weighted: np.ndarray, weights: np.ndarray,
+                        ancestors: np.ndarray) -> np.ndarray:
+        """The cloud ``resampled`` ``(n, N)`` (equal weights; ``weighted[:, ancestors]``) mapped to the
+        exact moments; when it has too few distinct particles to be mapped, the ``weighted`` cloud with
+        its ``weights`` ``(N,)`` is mapped and resampled instead. Mapping the resampled cloud once lands
+        where mapping the weighted cloud and resampling it would (:func:`match_moments`)."""
+        matched = match_moments(resampled, None, self.mean, self.cov, symmetric=True)
+        if matched is None:
+            matched = match_moments(weighted, weights, self.mean, self.cov, symmetric=True)
+            matched = None if matched is None else matched[:, ancestors]
+        return resampled if matched is None else matched
+
+
+@dataclass(frozen=True)
+class ProposalMixture:
+    """The mixture of proposals ``sum_i w_i N(mu_i, spread)`` a cloud was drawn from.
+
+    Attributes:
+        pair: ``(2 n, N)``: the proposal means ``mu_i`` (rows ``:n``) above the particles (rows ``n:``,
+            the filter's cloud itself, so what the filter does to its cloud in place shows here).
+        spread: the proposals' common covariance ``(n, n)``.
+    """
+
+    pair: np.ndarray
+    spread: np.ndarray
+
+    def moments(self, weights: np.ndarray) -> MixtureMoments | None:
+        """The mixture's and the particles' moments under the normalised ``weights`` ``(N,)``; None when
+        the mixture's are not finite (a runaway proposal: the sampled cloud is left as it is)."""
+        mean, sampled_mean, cov, sampled_cov = paired_moments(self.pair, weights, self.spread.shape[0])
+        cov += self.spread
+        if not np.isfinite(cov).all():  # (a non-finite mean makes the covariance non-finite)
+            return None
+        return MixtureMoments(mean, cov, sampled_mean, sampled_cov)

@@ -16,6 +16,9 @@ Two metrics for the state space:
   ``M H^T (H M H^T + eps R)^-1 r`` after un-whitening. ``H M H^T`` is then dimensionless in whitened
   coordinates and ``eps`` is absolute: with ``M = Q`` and ``eps = 1`` the shift is the Kalman-gain mean
   of the locally optimal proposal, while ``eps -> 0`` enforces the measurement exactly.
+
+Also here: the linearisation the projection starts from (:func:`innovation`) and the log-weight
+correction of a shifted prior transition (:func:`gaussian_shift_correction`).
 """
 from __future__ import annotations
 
@@ -24,6 +27,15 @@ from functools import lru_cache
 import numpy as np
 
 from gpf_nav.linalg import solve_spd
+from gpf_nav.sensors.sensor import Sensor
+
+
+def innovation(sensor: Sensor, states: np.ndarray, y: np.ndarray, rows: np.ndarray, time: float
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Jacobian ``H`` ``(N, k, n)`` and innovation ``r = y - h(x)`` ``(N, k)`` (angles wrapped) of the
+    measured ``rows`` ``(m,)`` of ``sensor`` at ``time``, for the particles ``states`` ``(N, n)``."""
+    h, H = sensor.measure_and_jacobian(states, time)
+    return select_rows(H, rows), select_columns(sensor.residual(y, h), rows)
 
 
 def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float,
@@ -100,3 +112,26 @@ def _as_index(columns: tuple[int, ...]) -> slice | list[int]:
     if columns == list(range(columns[0], columns[-1] + 1)):
         return slice(columns[0], columns[-1] + 1)
     return columns
+
+
+def select_rows(H: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``H[:, rows, :]`` of a Jacobian ``(N, m, n)`` without a copy when every row is kept; the
+    selection runs on the particle-last layout the models build, so it copies contiguous rows."""
+    if rows.all():
+        return H
+    return H.transpose(1, 2, 0)[rows].transpose(2, 0, 1)
+
+
+def select_columns(r: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``r[:, rows]`` of ``(N, m)`` without a copy when every component is kept."""
+    return r if rows.all() else r.T[rows].T
+
+
+def gaussian_shift_correction(shift: np.ndarray, inverse_factor: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """``log p(x|x_prev) - log q(x|x_prev, y)`` for ``q`` the prior transition shifted by ``shift``.
+
+    With ``x = flow + shift + L z`` and ``Q = L L^T``: ``-(L^-1 shift) . z - |L^-1 shift|^2 / 2``.
+    ``shift`` and ``z`` are ``(n, N)``, ``inverse_factor`` is ``L^-1`` ``(n, n)``; returns ``(N,)``.
+    """
+    s = inverse_factor @ shift
+    return -np.einsum("ij,ij->j", s, z) - 0.5 * np.einsum("ij,ij->j", s, s)
