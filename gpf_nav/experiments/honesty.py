@@ -29,6 +29,7 @@ from pathlib import Path
 
 from gpf_nav.arguments import CommandParser, positive_int
 from gpf_nav.experiments.montecarlo import base_config, git_commit, parse_filters, run_metadata, write_json
+from gpf_nav.experiments.parallel import add_campaign_arguments
 from gpf_nav.experiments.runner import NEES_BOUND, REPORT_AFTER
 from gpf_nav.experiments.stress import BEYOND, GRAVITY, _num, stress
 from gpf_nav.filters.interface import N_PARTICLES
@@ -89,12 +90,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = CommandParser(prog="gpf-nav honesty", description=__doc__.split("\n\n")[0],
                            formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--runs", type=positive_int, default=20, help="runs per condition (default 20)")
-    parser.add_argument("--seed", type=int, default=0, help="campaign seed (default 0)")
-    parser.add_argument("--workers", type=positive_int, default=None,
-                        help="local worker processes (default: all local cores)")
-    parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                        help="run on this Dask distributed scheduler instead of local processes")
+    add_campaign_arguments(parser, 20, "runs per condition")
     parser.add_argument("--config", type=Path, default=None,
                         help="base scenario YAML (default: the built-in defaults, epsilon set to 0)")
     parser.add_argument("--duration", type=float, default=None, help="override the duration (s)")

@@ -34,7 +34,7 @@ import numpy as np
 
 from gpf_nav.arguments import CommandParser, positive_float, positive_int
 from gpf_nav.experiments import metrics
-from gpf_nav.experiments.parallel import default_workers, map_tasks
+from gpf_nav.experiments.parallel import add_campaign_arguments, default_workers, map_tasks
 from gpf_nav import registry
 from gpf_nav.experiments.runner import FILTERS, RunTask, run_task, select_oracle
 from gpf_nav.filters.interface import N_PARTICLES
@@ -61,13 +61,7 @@ METRICS = {
 # --- command line shared with the sweep -------------------------------------------------------------
 def add_common_arguments(parser: argparse.ArgumentParser, runs: int) -> None:
     """Options shared by ``montecarlo`` and ``sweep``."""
-    parser.add_argument("--runs", type=positive_int, default=runs, help=f"Monte Carlo runs (default {runs})")
-    parser.add_argument("--seed", type=int, default=0, help="campaign seed (default 0)")
-    parser.add_argument("--workers", type=positive_int, default=None,
-                        help="local worker processes (default: all local cores)")
-    parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                        help="run on this Dask distributed scheduler (e.g. tcp://host:8786) instead "
-                             "of local processes; the workers must have gpf_nav installed")
+    add_campaign_arguments(parser, runs, "Monte Carlo runs")
     parser.add_argument("--config", type=Path, default=None,
                         help="scenario YAML (default: the built-in defaults = config/scenario.yaml)")
     parser.add_argument("--duration", type=positive_float, default=None,

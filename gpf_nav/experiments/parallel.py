@@ -13,13 +13,28 @@ A tqdm progress bar on stderr counts finished tasks.
 """
 from __future__ import annotations
 
+import argparse
 import contextlib
 import multiprocessing
 import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 
+from gpf_nav.arguments import positive_int
+
 _THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def add_campaign_arguments(parser: argparse.ArgumentParser, runs: int, runs_help: str) -> None:
+    """The options every campaign shares: ``--runs`` (default ``runs``, described by ``runs_help``),
+    ``--seed`` and where the runs go (``--workers``, ``--scheduler``: :func:`map_tasks`)."""
+    parser.add_argument("--runs", type=positive_int, default=runs, help=f"{runs_help} (default {runs})")
+    parser.add_argument("--seed", type=int, default=0, help="campaign seed (default 0)")
+    parser.add_argument("--workers", type=positive_int, default=None,
+                        help="local worker processes (default: all local cores)")
+    parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                        help="run on this Dask distributed scheduler (e.g. tcp://host:8786) instead "
+                             "of local processes; the workers must have gpf_nav installed")
 
 
 def default_workers() -> int:

@@ -46,7 +46,7 @@ import numpy as np
 from gpf_nav import registry
 from gpf_nav.arguments import CommandParser, positive_float, positive_int
 from gpf_nav.experiments.montecarlo import base_config, git_commit, parse_filters, run_metadata, write_json
-from gpf_nav.experiments.parallel import map_tasks
+from gpf_nav.experiments.parallel import add_campaign_arguments, map_tasks
 from gpf_nav.experiments.runner import RunTask, run_task, select_oracle
 from gpf_nav.experiments.surface import SURFACE
 from gpf_nav.filters.interface import N_PARTICLES
@@ -228,12 +228,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = CommandParser(prog="gpf-nav stress", description=__doc__.split("\n\n")[0],
                            formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--runs", type=positive_int, default=20, help="runs per condition (default 20)")
-    parser.add_argument("--seed", type=int, default=0, help="campaign seed (default 0)")
-    parser.add_argument("--workers", type=positive_int, default=None,
-                        help="local worker processes (default: all local cores)")
-    parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                        help="run on this Dask distributed scheduler instead of local processes")
+    add_campaign_arguments(parser, 20, "runs per condition")
     parser.add_argument("--config", type=Path, default=None,
                         help="base scenario YAML (default: the built-in defaults = config/scenario.yaml)")
     parser.add_argument("--epsilon", type=float, default=0.0,
