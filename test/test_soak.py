@@ -7,7 +7,7 @@ import pytest
 
 from domains import fresh_domain
 
-from gpf_nav.tools.soak import GARBAGE, STREAM_CATEGORIES, Ledger
+from gpf_nav.tools.soak_ledger import GARBAGE, STREAM_CATEGORIES, Ledger
 
 S = 1_000_000_000
 

@@ -25,7 +25,6 @@ Output: a table on stdout, ``<out>/integrity.json`` and the figures ``docs/figur
 from __future__ import annotations
 
 import copy
-import json
 import math
 import sys
 import time
@@ -36,6 +35,7 @@ import numpy as np
 
 from gpf_nav import registry
 from gpf_nav.arguments import CommandParser, positive_int
+from gpf_nav.experiments.montecarlo import read_json, write_json
 from gpf_nav.integrity import CostateMonitor
 from gpf_nav.models.state_space import wrap_angle
 from gpf_nav.models.lunar import MOON_RADIUS, LunarDescentModel
@@ -452,25 +452,18 @@ def table(settings: Settings, summary: dict) -> str:
 
 
 # --- figures -------------------------------------------------------------------------------------------
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
+_DPI = 100  # the panels are wide (up to 19 in): a lower resolution than plots.save's default
 _COLOURS = {"GPF": "#d62728", "GPF-paper": "#ff7f0e", "GPF-Q": "#e377c2", "SPF": "#1f77b4", "SPF-2k": "#2ca02c"}
 
 
 def draw_figures(settings: Settings, runs: list[dict], summary: dict, example: dict, times: np.ndarray,
                  directory: Path) -> list[Path]:
     """``integrity_false_alarms.png``, ``integrity_delays.png`` and ``integrity_example.png``."""
-    plt = _pyplot()
     from matplotlib.ticker import NullFormatter
 
-    directory.mkdir(parents=True, exist_ok=True)
+    from gpf_nav.experiments.plots import pyplot, save
+
+    plt = pyplot()
     written = []
     variants = settings.variants
 
@@ -512,7 +505,7 @@ def draw_figures(settings: Settings, runs: list[dict], summary: dict, example: d
         else:
             ax.set_xlabel("|time mean of the whitened range innovation|, 1200-2400 s (sigma)")
             ax.set_title("Per run at epsilon = 0: alarms vs range prediction bias", fontsize=10)
-    written.append(_save(plt, fig, directory / "integrity_false_alarms.png"))
+    written.append(save(fig, directory / "integrity_false_alarms.png", dpi=_DPI))
 
     # 2. detection delays per fault and variant; runs already in FAULT at the fault time are not tests
     faults = [name for name, _, _ in settings.faults()]
@@ -556,7 +549,7 @@ def draw_figures(settings: Settings, runs: list[dict], summary: dict, example: d
     fig.suptitle(f"Co-state monitor detection, {settings.runs} runs (bar: median of detected runs; "
                  "runs already in FAULT at the fault time are left out)", y=1.0)
     fig.tight_layout()
-    written.append(_save(plt, fig, directory / "integrity_delays.png"))
+    written.append(save(fig, directory / "integrity_delays.png", dpi=_DPI))
 
     # 3. one run: T^2 / threshold against time for every scenario and variant
     fig, axes = plt.subplots(len(faults) + 2, 1, figsize=(11, 2.4 * (len(faults) + 2)), sharex=True)
@@ -579,14 +572,8 @@ def draw_figures(settings: Settings, runs: list[dict], summary: dict, example: d
     fig.suptitle("Monitor statistic relative to its FAULT threshold (above 1 = FAULT; dotted: fault time)",
                  y=1.0)
     fig.tight_layout()
-    written.append(_save(plt, fig, directory / "integrity_example.png"))
+    written.append(save(fig, directory / "integrity_example.png", dpi=_DPI))
     return written
-
-
-def _save(plt, fig, path: Path) -> Path:
-    fig.savefig(path, dpi=100, bbox_inches="tight")
-    plt.close(fig)
-    return path
 
 
 # --- synthetic calibration ------------------------------------------------------------------------------
@@ -626,31 +613,6 @@ def synthetic_calibration(settings: Settings, steps: int, seed: int) -> dict:
 
 
 # --- command line --------------------------------------------------------------------------------------
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, (np.floating, float)):
-        return float(obj) if np.isfinite(obj) else None
-    if isinstance(obj, np.integer):
-        return int(obj)
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    return obj
-
-
-def _nan_for_none(obj):
-    """Inverse of :func:`_jsonable` for the non-finite floats (written as null)."""
-    if isinstance(obj, dict):
-        return {k: _nan_for_none(v) for k, v in obj.items()}
-    if isinstance(obj, list):
-        return [_nan_for_none(v) for v in obj]
-    return math.nan if obj is None else obj
-
-
 def _csv(values) -> str:
     return ",".join(f"{v:g}" for v in values)
 
@@ -707,7 +669,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(str(err))
     start = time.perf_counter()
     if args.replot:
-        report = _nan_for_none(json.loads(args.replot.read_text()))
+        report = read_json(args.replot)
         settings = Settings(**{k: tuple(v) if isinstance(v, list) else v
                                for k, v in report["settings"].items()})
         runs = report["runs"]
@@ -729,11 +691,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{'series':12s} " + " ".join(f"{'a=' + format(a, 'g'):>9s}" for a in settings.alphas))
         for kind, r in result.items():
             print(f"{kind:12s} " + " ".join(f"{v:9.4f}" for v in r["rate_p_below"]))
-        args.out.mkdir(parents=True, exist_ok=True)
         path = args.out / "integrity_synthetic.json"
-        path.write_text(json.dumps(_jsonable({"settings": settings.__dict__, "steps": args.synthetic,
-                                              "series": result, "command": "python -m "
-                                              "gpf_nav.experiments.integrity_campaign " + " ".join(argv)}), indent=1))
+        write_json({"settings": settings.__dict__, "steps": args.synthetic, "series": result,
+                    "command": "python -m gpf_nav.experiments.integrity_campaign " + " ".join(argv)}, path)
         print(f"\nwall time {time.perf_counter() - start:.0f} s; wrote {path}")
         return 0
     runs = []
@@ -756,9 +716,8 @@ def main(argv: list[str] | None = None) -> int:
     report = {"settings": settings.__dict__, "variant_labels": VARIANT_LABELS, "summary": summary,
               "runs": runs, "wall_seconds": wall,
               "command": "python -m gpf_nav.experiments.integrity_campaign " + " ".join(argv)}
-    args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "integrity.json"
-    path.write_text(json.dumps(_jsonable(report)))
+    write_json(report, path, indent=None)  # one line: the example run's series are long
     written.append(path)
     print(f"\nwall time {wall:.0f} s; wrote " + ", ".join(str(p) for p in written))
     return 0

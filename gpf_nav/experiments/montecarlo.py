@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import platform
 import subprocess
 import sys
@@ -133,9 +134,15 @@ def run_metadata(args, wall: float, argv, commit: str | None = None) -> dict:
             "started": time.strftime("%Y-%m-%d %H:%M:%S %Z", time.localtime(time.time() - wall))}
 
 
-def write_json(data: dict, path: Path) -> None:
+def write_json(data: dict, path: Path, indent: int | None = 1) -> None:
+    """Write ``data`` (numpy values allowed) as strict JSON: a non-finite float is written as null."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(_jsonable(data), indent=1, allow_nan=False) + "\n")
+    path.write_text(json.dumps(_jsonable(data), indent=indent, allow_nan=False) + "\n")
+
+
+def read_json(path: Path):
+    """The data of a file :func:`write_json` wrote, each null back to NaN."""
+    return _nan_for_none(json.loads(Path(path).read_text()))
 
 
 def _jsonable(value):
@@ -147,9 +154,19 @@ def _jsonable(value):
         return float(value) if np.isfinite(value) else None
     if isinstance(value, (np.integer,)):
         return int(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
     if isinstance(value, np.ndarray):
         return _jsonable(value.tolist())
     return value
+
+
+def _nan_for_none(value):
+    if isinstance(value, dict):
+        return {k: _nan_for_none(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_nan_for_none(v) for v in value]
+    return math.nan if value is None else value
 
 
 # --- aggregation -------------------------------------------------------------------------------------

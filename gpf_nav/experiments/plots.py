@@ -34,7 +34,8 @@ _STYLES = {"UKF": "--", "GPF exact (innovation, corrected)": "--", "EKF, oracle-
            "UKF, oracle-tuned Q": ":"}
 
 
-def _pyplot():
+def pyplot():
+    """``matplotlib.pyplot`` on the headless ``Agg`` backend (imported on first use)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -51,11 +52,12 @@ def style(name: str) -> str:
     return _STYLES.get(name, "-")
 
 
-def _save(fig, path: Path) -> Path:
+def save(fig, path: Path, dpi: int = 110) -> Path:
+    """Write ``fig`` to ``path`` (its folder made if need be), trimmed to its content, and close it."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    _pyplot().close(fig)
+    fig.savefig(path, dpi=dpi, bbox_inches="tight")
+    pyplot().close(fig)
     return path
 
 
@@ -64,7 +66,7 @@ def error_evolution(times: np.ndarray, errors: dict, runs: int, path: Path) -> P
 
     ``errors[case][filter]`` is ``(runs, K)`` in metres.
     """
-    plt = _pyplot()
+    plt = pyplot()
     cases = list(errors)
     fig, axes = plt.subplots(1, len(cases), figsize=(7.0 * len(cases), 5.0), squeeze=False, layout="constrained")
     for ax, case in zip(axes[0], cases):
@@ -81,12 +83,12 @@ def error_evolution(times: np.ndarray, errors: dict, runs: int, path: Path) -> P
         ax.grid(True, which="both", alpha=0.3)
     _shared_legend(fig, axes[0][0])
     fig.suptitle(f"Position error over time: median of {runs} Monte Carlo runs, shaded 10-90 % of runs")
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def ess_evolution(times: np.ndarray, ess: dict, runs: int, threshold: float, path: Path) -> Path:
     """ESS/N (before resampling) against time, mean over runs, particle filters only."""
-    plt = _pyplot()
+    plt = pyplot()
     cases = list(ess)
     fig, axes = plt.subplots(1, len(cases), figsize=(7.0 * len(cases), 4.5), squeeze=False, layout="constrained")
     for ax, case in zip(axes[0], cases):
@@ -103,12 +105,12 @@ def ess_evolution(times: np.ndarray, ess: dict, runs: int, threshold: float, pat
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8, loc="lower left", title="time average of ESS/N", title_fontsize=8)
     fig.suptitle(f"Normalised effective sample size, mean of {runs} Monte Carlo runs")
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def nees_evolution(times: np.ndarray, nees: dict, band: tuple[float, float], runs: int, path: Path) -> Path:
     """Run-averaged NEES against time (log scale) with the 95 % chi-square band of a consistent filter."""
-    plt = _pyplot()
+    plt = pyplot()
     cases = list(nees)
     fig, axes = plt.subplots(1, len(cases), figsize=(7.0 * len(cases), 4.5), squeeze=False, layout="constrained")
     for ax, case in zip(axes[0], cases):
@@ -128,12 +130,12 @@ def nees_evolution(times: np.ndarray, nees: dict, band: tuple[float, float], run
     _shared_legend(fig, axes[0][0], columns=3)
     fig.suptitle(f"Filter consistency: normalised estimation error squared, mean of {runs} runs "
                  f"(a consistent filter stays in the grey band)")
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def rmse_boxplot(per_run: dict, path: Path) -> Path:
     """Distribution over runs of the position RMSE (km), one box per filter, one panel per case."""
-    plt = _pyplot()
+    plt = pyplot()
     cases = list(per_run)
     fig, axes = plt.subplots(1, len(cases), figsize=(7.0 * len(cases), 4.8), squeeze=False, layout="constrained")
     for column, (ax, case) in enumerate(zip(axes[0], cases)):
@@ -154,7 +156,7 @@ def rmse_boxplot(per_run: dict, path: Path) -> Path:
         ax.grid(True, which="both", axis="x", alpha=0.3)
     runs = max(len(v) for c in per_run.values() for v in c.values())
     fig.suptitle(f"Position RMSE per Monte Carlo run ({runs} runs per box)")
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def costate_degeneracy(points: dict, correlations: dict, runs: int, path: Path) -> Path:
@@ -164,7 +166,7 @@ def costate_degeneracy(points: dict, correlations: dict, runs: int, path: Path) 
     ``correlations[case][filter]`` the Pearson coefficients ``costate_vs_ess`` and ``ess_vs_error``.
     Row per case; left: co-state norm against ESS/N; right: position error against ESS/N.
     """
-    plt = _pyplot()
+    plt = pyplot()
     cases = list(points)
     fig, axes = plt.subplots(len(cases), 2, figsize=(13.0, 4.8 * len(cases)), squeeze=False, layout="constrained")
     for row, case in enumerate(cases):
@@ -190,7 +192,7 @@ def costate_degeneracy(points: dict, correlations: dict, runs: int, path: Path) 
         ax_e.set_title(f"({'abcdefgh'[2 * row + 1]}) {label}: position error vs ESS/N", fontsize=10)
     fig.suptitle(f"Co-state, degeneracy and error, one point per time step of {runs} runs "
                  f"(rho: Pearson correlation over all steps)")
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def _shared_legend(fig, ax, columns: int = 4) -> None:
@@ -210,7 +212,7 @@ def sweep(values: np.ndarray, tables: dict, param_label: str, runs: int, path: P
 
     ``tables[metric label][case][filter]`` is a list of ``{mean, std}``, one per value.
     """
-    plt = _pyplot()
+    plt = pyplot()
     metrics = list(tables)
     cases = list(tables[metrics[0]])
     fig, axes = plt.subplots(len(metrics), len(cases), figsize=(7.0 * len(cases), 4.2 * len(metrics)),
@@ -231,7 +233,7 @@ def sweep(values: np.ndarray, tables: dict, param_label: str, runs: int, path: P
             ax.grid(True, which="both", alpha=0.3)
     _shared_legend(fig, axes[0][0])
     fig.suptitle(f"Against {param_label.split(' (')[0]}, {runs} Monte Carlo runs per point")
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def stress(conditions: dict, prior: list, runs: int, path: Path) -> Path:
@@ -241,7 +243,7 @@ def stress(conditions: dict, prior: list, runs: int, path: Path) -> Path:
     ``conditions[name] = (label, {filter: row})`` and ``prior = [(scale, {filter: row}), ...]`` with the
     rows of :func:`gpf_nav.experiments.stress.summarise` (metres).
     """
-    plt = _pyplot()
+    plt = pyplot()
     names = list(conditions)
     filters = list(next(iter(conditions.values()))[1])
     ratios = [2.2, 2.2, 1.2] if prior else [2.2, 2.2]
@@ -281,7 +283,7 @@ def stress(conditions: dict, prior: list, runs: int, path: Path) -> Path:
     _shared_legend(fig, axes[0], columns=len(filters))
     fig.suptitle(f"Stress campaign: {runs} runs per condition, the same runs for every filter "
                  f"(NEES: grey band 2-15, dotted line 6)")
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def estimate_errors(times: np.ndarray, errors: np.ndarray, sigmas: np.ndarray, title: str, path: Path) -> Path:
@@ -290,7 +292,7 @@ def estimate_errors(times: np.ndarray, errors: np.ndarray, sigmas: np.ndarray, t
     ``times`` ``(K,)`` s, ``errors`` and ``sigmas`` ``(K, 6)`` (estimate - truth and the filter's standard
     deviations of ``x, y, z`` in m and ``vx, vy, vz`` in m/s). Top row position, bottom row velocity.
     """
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(2, 3, figsize=(14.0, 6.5), sharex=True, layout="constrained")
     labels = [("x", "m"), ("y", "m"), ("z", "m"), ("vx", "m/s"), ("vy", "m/s"), ("vz", "m/s")]
     for i, ax in enumerate(axes.reshape(-1)):
@@ -306,4 +308,4 @@ def estimate_errors(times: np.ndarray, errors: np.ndarray, sigmas: np.ndarray, t
             ax.set_xlabel("time since the first update (s)")
     axes[0][0].legend(fontsize=8, loc="upper right")
     fig.suptitle(title)
-    return _save(fig, path)
+    return save(fig, path)
