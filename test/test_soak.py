@@ -30,7 +30,7 @@ def test_short_soak_accounts_for_every_message(monkeypatch, capsys):
     monkeypatch.setenv("ROS_DOMAIN_ID", str(fresh_domain()))
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     from gpf_nav.tools.soak import main
-    code = main(["--sim-minutes", "3", "--rate-factor", "10", "--warmup", "60", "--seed", "0",
+    code = main(["--sim-minutes", "3", "--rate-factor", "5", "--warmup", "60", "--seed", "0",
                  "--drop", "0.05", "--delay", "0.05", "--duplicate", "0.05", "--mask", "0.05",
                  "--garbage", "0.3", "--burst", "0.05", "--burst-size", "10", "--timeout", "150", "--json"])
     out = capsys.readouterr().out
