@@ -44,6 +44,7 @@ from gpf_nav.filters.cloud_proposal import CloudProposal, FlattenedProposal
 from gpf_nav.filters.compensated import (UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME,
                                          ModelErrorCompensated)
 from gpf_nav.filters.gating import OUTLIER_GATE, OUTLIER_GATE_LIMIT, InnovationGated
+from gpf_nav.filters.interface import N_PARTICLES
 from gpf_nav.filters.kernel import default_bandwidth
 from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
 from gpf_nav.filters.paper_proposal import ProjectionProposal
@@ -134,7 +135,7 @@ class GeometricProjectionPF(ModelErrorCompensated, InnovationGated, ParticleFilt
         collapse_steps: see :class:`ParticleFilter`.
     """
 
-    def __init__(self, model: StateSpaceModel, n_particles: int = 500, reference: str = "innovation",
+    def __init__(self, model: StateSpaceModel, n_particles: int = N_PARTICLES, reference: str = "innovation",
                  weighting: str = "corrected", metric: str = "cloud", regularization: float | None = None,
                  unmodelled_acceleration_std: float = UNMODELLED_ACCELERATION_STD,
                  unmodelled_acceleration_time: float = UNMODELLED_ACCELERATION_TIME,

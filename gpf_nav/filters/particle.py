@@ -26,7 +26,7 @@ import numpy as np
 from gpf_nav import resampling as resamplers
 from gpf_nav.filters.constraint import constrain
 from gpf_nav.filters.flattening import Flattening
-from gpf_nav.filters.interface import CLOUD, COSTATE, RESAMPLING, TEMPERING, Filter
+from gpf_nav.filters.interface import CLOUD, COSTATE, N_PARTICLES, RESAMPLING, TEMPERING, Filter
 from gpf_nav.filters.kernel import map_moments, weighted_moments
 from gpf_nav.filters.likelihood import Whitening, log_likelihood
 from gpf_nav.filters.proposal import PriorProposal, Proposal, Stage
@@ -69,7 +69,7 @@ class ParticleFilter(Filter):
         tempered_updates: updates split into more than one stage so far.
     """
 
-    def __init__(self, model: StateSpaceModel, n_particles: int = 500, resampling: str = "systematic",
+    def __init__(self, model: StateSpaceModel, n_particles: int = N_PARTICLES, resampling: str = "systematic",
                  ess_threshold: float = 0.5, seed: int | np.random.Generator | None = None,
                  collapse_steps: int = 0, tempering_ess: float = 0.0,
                  observability_constraint: float = 0.0, proposal: Proposal | None = None):
@@ -465,7 +465,7 @@ class BootstrapPF(ParticleFilter):
         Other arguments as :class:`ParticleFilter`.
     """
 
-    def __init__(self, model: StateSpaceModel, n_particles: int = 500, resampling: str = "systematic",
+    def __init__(self, model: StateSpaceModel, n_particles: int = N_PARTICLES, resampling: str = "systematic",
                  ess_threshold: float = 0.5, seed: int | np.random.Generator | None = None,
                  compute_costate: bool = False, regularization: float = 1e-6, collapse_steps: int = 0,
                  observability_constraint: float = 0.0):
