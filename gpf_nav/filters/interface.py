@@ -59,6 +59,8 @@ ATTRIBUTES: dict[str, tuple[str, ...]] = {
 """The attributes and methods of :class:`Filter` that answer each capability (what a composite filter,
 :mod:`gpf_nav.filters.composite`, reads from the member that answers it)."""
 
+PADDED_SENSORS = 16
+"""Padded wrappers of user sensors a filter keeps (:meth:`Filter._sensor_for`)."""
 N_PARTICLES = 500
 """Default number of particles or ensemble members of the filters that have a :data:`CLOUD`."""
 
@@ -277,7 +279,17 @@ class Filter(ABC):
         if sensor is None:
             return self._own_sensor
         if self.sensor_state_dim < self.model.state_dim:
-            return Padded(sensor, self.sensor_state_dim, self.model.state_dim)
+            # one wrapper per user sensor, so that the observability tracker's log sees one sensor and
+            # rebuilds its Jacobians in one call per sensor, not one per logged update; the wrapper holds
+            # the sensor, so its id is not reused while cached (a few sensors: the cache is emptied past
+            # PADDED_SENSORS)
+            cache = self.__dict__.setdefault("_padded", {})
+            padded = cache.get(id(sensor))
+            if padded is None or padded.sensor is not sensor:
+                if len(cache) >= PADDED_SENSORS:
+                    cache.clear()
+                padded = cache[id(sensor)] = Padded(sensor, self.sensor_state_dim, self.model.state_dim)
+            return padded
         return sensor
 
     def _check_measurement(self, y, sensor: Sensor) -> tuple[np.ndarray, np.ndarray]:
