@@ -35,7 +35,7 @@ import numpy as np
 
 from gpf_nav import registry
 from gpf_nav.arguments import CommandParser, positive_int
-from gpf_nav.experiments.montecarlo import read_json, write_json
+from gpf_nav.experiments.montecarlo import git_commit, read_json, write_json
 from gpf_nav.integrity import CostateMonitor
 from gpf_nav.models.state_space import wrap_angle
 from gpf_nav.models.lunar import MOON_RADIUS, LunarDescentModel
@@ -696,6 +696,7 @@ def main(argv: list[str] | None = None) -> int:
                     "command": "python -m gpf_nav.experiments.integrity_campaign " + " ".join(argv)}, path)
         print(f"\nwall time {time.perf_counter() - start:.0f} s; wrote {path}")
         return 0
+    commit = git_commit()  # the code this process runs; read before a long campaign
     runs = []
     for run in range(settings.runs):
         runs.append(run_one(settings, run, keep_series=(run == 0)))
@@ -714,7 +715,7 @@ def main(argv: list[str] | None = None) -> int:
                 if series is not None:
                     s["series"] = {"statistic": series["statistic"], "threshold": series["threshold"]}
     report = {"settings": settings.__dict__, "variant_labels": VARIANT_LABELS, "summary": summary,
-              "runs": runs, "wall_seconds": wall,
+              "runs": runs, "wall_seconds": wall, "git_commit": commit,
               "command": "python -m gpf_nav.experiments.integrity_campaign " + " ".join(argv)}
     path = args.out / "integrity.json"
     write_json(report, path, indent=None)  # one line: the example run's series are long
