@@ -72,6 +72,17 @@ def test_moments_and_the_moment_map_are_the_numpy_ones(count):
 
 
 @pytest.mark.parametrize("count", SIZES)
+def test_the_count_of_particles_beyond_the_state_limit_is_the_numpy_one(count):
+    """The particle filters' non-finite check: NaN, infinite and huge components, in any row."""
+    rng = np.random.default_rng(40 + count)
+    for rows in (1, 6, 9):
+        x = rng.standard_normal((rows, count)) * 1e149
+        hit = rng.integers(0, count, 3)
+        x[0, hit[0]], x[rows - 1, hit[1]], x[:, hit[2]] = np.nan, np.inf, 0.9e150
+        assert cloud.count_outside(x, 1e150) == np.count_nonzero(~(np.abs(x.sum(axis=0)) < 1e150))
+
+
+@pytest.mark.parametrize("count", SIZES)
 def test_systematic_resampling_is_the_numpy_one(count):
     rng = np.random.default_rng(20 + count)
     _, w = _cloud(rng, 1, count)

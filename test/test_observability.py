@@ -367,6 +367,7 @@ def test_the_rebuild_gives_the_numbers_of_its_calls_one_at_a_time(kind):
             if kind != "user model" and j == 0 and k % 5 == 1:
                 rows[1] = False  # no azimuth
             tracker.update(sensor, sensor.measure(tracker.reference[None], t)[0], rows, t, tracker.reference)
+    tracker.report()  # (runs the queued calls)
     before = tracker._data.copy()
     moved = tracker.reference * (1.0 + 1e-3 * rng.standard_normal(tracker.reference.size))
     tracker.reanchor(moved)

@@ -311,8 +311,9 @@ class ParticleFilter(Filter):
             # resampling below tau N
             if resampling:
                 weighted, ancestors = self._x, self._resample(self._weights, self.rng)
-                self._x = np.ascontiguousarray(weighted[:, ancestors])
-                self._costate = self._costate[ancestors]
+                self._x = np.take(weighted, ancestors, axis=1)  # (a C-contiguous copy, faster than [:, ancestors])
+                if self._costate_rows.any():  # (else the co-state is zero)
+                    self._costate = self._costate[ancestors]
                 if moments is not None:
                     self._x = moments.match_resampled(self._x, weighted, self._weights, ancestors)
                 self._set_uniform_weights()
@@ -365,10 +366,11 @@ class ParticleFilter(Filter):
         """Give non-finite particles zero weight (and a finite placeholder state); recover when none
         is left. A particle beyond ``STATE_LIMIT`` counts as non-finite: its covariance would overflow.
         Returns False when the filter had to re-initialise."""
-        column_sums = np.abs(self._x.sum(axis=0))  # NaN or beyond the limit iff a component is (about)
-        if (column_sums < STATE_LIMIT).all():
+        # a column sum is NaN or beyond the limit iff a component is (about); counted in one compiled pass
+        # (the check runs twice a step), the rare bad cloud then mended by numpy
+        if not cloud.count_outside(self._x, STATE_LIMIT):
             return True
-        bad = ~(column_sums < STATE_LIMIT)
+        bad = ~(np.abs(self._x.sum(axis=0)) < STATE_LIMIT)
         if bad.all():
             self._recover("every particle became non-finite")
             return False

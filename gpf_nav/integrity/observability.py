@@ -45,6 +45,8 @@ reference to the filter's mean."""
 REBUILD_LOG = 20_000
 """Predictions and updates since the prior that the tracker keeps to rebuild its recursions along a new
 reference (:meth:`ObservabilityTracker.reanchor`); past it a move keeps what was accumulated."""
+QUEUE_LIMIT = 4096
+"""Predictions and updates a tracker queues before it runs them unread (:class:`ObservabilityTracker`)."""
 
 @dataclass(frozen=True)
 class ObservabilityReport:
@@ -107,6 +109,14 @@ class ObservabilityTracker:
     carried information against the new Jacobians, like a moving mean, and give information to a
     direction no measurement sees.
 
+    The recursions run when they are read. :meth:`predict` and :meth:`update` queue their calls (with
+    copies of their arrays and the sensor's noise at the call); a read (:meth:`report`, :meth:`basis`,
+    :attr:`reference`, the counters), :meth:`reanchor` or :meth:`reset` first runs the queue in order, the
+    same arithmetic on the same numbers as at the calls, and so does a queue of :data:`QUEUE_LIMIT` calls.
+    A filter whose update does not read the tracker (no observability constraint) pays for it only when
+    its report is asked for: a bootstrap filter whose diverged estimate moves the reference at every
+    update would otherwise rebuild the whole log at every step.
+
     Args:
         model: the filter's state-space model (its own state: augmented, if the filter augments it).
         threshold: information over the prior's below which a direction is undetermined.
@@ -122,19 +132,39 @@ class ObservabilityTracker:
         self._log: _Log | None = None
         self._report: ObservabilityReport | None = None
         self._noise: tuple[float, np.ndarray] | None = None
-        self.updates = 0
-        self.elapsed = 0.0
-        self.reanchors = 0
+        self._queue = _Queue()
+        self._updates = 0
+        self._elapsed = 0.0
+        self._reanchors = 0
+
+    @property
+    def updates(self) -> int:
+        """Measurement updates since the prior."""
+        self._run_queue()
+        return self._updates
+
+    @property
+    def elapsed(self) -> float:
+        """Time predicted over since the prior, s."""
+        self._run_queue()
+        return self._elapsed
+
+    @property
+    def reanchors(self) -> int:
+        """Moves of the reference so far (:meth:`reanchor`)."""
+        self._run_queue()
+        return self._reanchors
 
     def reset(self, mean: np.ndarray, cov: np.ndarray) -> None:
         """Start again from the prior ``N(mean (n,), cov (n, n))``: nothing is determined yet."""
+        self._run_queue()  # (the queued calls count in reanchors)
         cov = np.array(cov, dtype=float)
         self._reference = np.array(mean, dtype=float)
         self._free, self._data = cov, cov.copy()
         self._prior = cov.copy()
         self._log = _Log()
-        self.updates = 0
-        self.elapsed = 0.0
+        self._updates = 0
+        self._elapsed = 0.0
         self._report = None
 
     @property
@@ -145,16 +175,22 @@ class ObservabilityTracker:
     @property
     def reference(self) -> np.ndarray | None:
         """``(n,)`` the state the recursions are linearised at now (None before :meth:`reset`)."""
+        self._run_queue()
         return None if self._reference is None else self._reference.copy()
 
     def reanchor(self, mean: np.ndarray) -> None:
         """Move the reference to ``mean`` ``(n,)`` (the filter's) and rebuild both recursions along the
         model's trajectory through it (:meth:`_rebuild`); when that cannot be done (a log past
         :data:`REBUILD_LOG`, a model that does not flow back), keep what was accumulated."""
+        self._run_queue()
+        self._reanchor(mean)
+
+    def _reanchor(self, mean: np.ndarray) -> None:
+        """:meth:`reanchor`, the queue already run."""
         mean = np.asarray(mean, dtype=float)
         if self._free is not None and np.isfinite(mean).all():
             self._reference = mean.copy()
-            self.reanchors += 1
+            self._reanchors += 1
             self._rebuild()
             self._report = None
 
@@ -227,10 +263,40 @@ class ObservabilityTracker:
         return H, R, count
 
     def predict(self, dt: float, t: float, u=None) -> None:
-        """Carry both recursions and the reference over ``dt`` from time ``t``
-        with the input ``u``."""
+        """Carry both recursions and the reference over ``dt`` from time ``t`` with the input ``u`` (queued:
+        class docstring)."""
         if self._free is None:
             return
+        self._enqueue((None, float(dt), float(t), None if u is None else np.array(u, dtype=float)))
+
+    def update(self, sensor, y: np.ndarray, rows: np.ndarray, t: float, mean: np.ndarray) -> None:
+        """Add the information of the measured ``rows`` ``(m,)`` of ``y`` from ``sensor`` at time ``t``,
+        linearised at the reference (moved first to the filter's ``mean`` ``(n,)`` when ``y`` is beyond
+        the no-data prediction's reach; queued: class docstring)."""
+        if self._free is None or not rows.any():
+            return
+        self._enqueue((sensor, np.array(y, dtype=float), rows.copy(), float(t), np.array(mean, dtype=float),
+                       np.array(sensor.noise(t), dtype=float)))
+
+    def _enqueue(self, call: tuple) -> None:
+        self._queue.append(call)
+        if len(self._queue) >= QUEUE_LIMIT:
+            self._run_queue()
+
+    def _run_queue(self) -> None:
+        """Run the queued calls in order (:meth:`_predict` for ``(None, dt, t, u)``, :meth:`_update` for
+        ``(sensor, y, rows, t, mean, R)``)."""
+        if not self._queue:
+            return
+        queue, self._queue = self._queue, _Queue()
+        for call in queue:
+            if call[0] is None:
+                self._predict(*call[1:])
+            else:
+                self._update(*call)
+
+    def _predict(self, dt: float, t: float, u: np.ndarray | None) -> None:
+        """:meth:`predict`, run."""
         x = self._reference[None]
         F = _matrix(self.model.transition_jacobian(x, dt, t, u)[0])
         Q = _matrix(self._process_noise(dt, t))
@@ -240,7 +306,7 @@ class ObservabilityTracker:
             return
         self._log.predict(dt, t, u)
         self._reference = reference
-        self.elapsed += dt
+        self._elapsed += dt
         self._free, self._data = free, data
         self._report = None
 
@@ -252,34 +318,32 @@ class ObservabilityTracker:
             self._noise = (dt, self.model.process_noise(dt, t))
         return self._noise[1]
 
-    def update(self, sensor, y: np.ndarray, rows: np.ndarray, t: float, mean: np.ndarray) -> None:
-        """Add the information of the measured ``rows`` ``(m,)`` of ``y`` from ``sensor`` at time ``t``,
-        linearised at the reference (moved first to the filter's ``mean`` ``(n,)`` when ``y`` is beyond
-        the no-data prediction's reach)."""
-        if self._free is None or not rows.any():
-            return
+    def _update(self, sensor, y: np.ndarray, rows: np.ndarray, t: float, mean: np.ndarray,
+                noise: np.ndarray) -> None:
+        """:meth:`update`, run; ``noise`` ``(m, m)`` is the sensor's at the call."""
         h, H = sensor.measure_and_jacobian(self._reference[None], t)
         if rows.all():  # (no gathers: the usual case)
-            H, R, r = H[0], sensor.noise(t), sensor.residual(y, h[0])
+            H, R, r = H[0], noise, sensor.residual(y, h[0])
         else:
-            H, R, r = H[0][rows], sensor.noise(t)[np.ix_(rows, rows)], sensor.residual(y, h[0])[rows]
+            H, R, r = H[0][rows], noise[np.ix_(rows, rows)], sensor.residual(y, h[0])[rows]
         H, R = _matrix(H), _matrix(R)
         outcome, data = information.update(H, R, _matrix(r), self._free, self._data, REANCHOR_SIGMAS ** 2)
         if outcome == information.NOT_FINITE:
             return
         if outcome == information.FAR:
-            self.reanchor(mean)
+            self._reanchor(mean)
             H = _matrix(sensor.jacobian(self._reference[None], t)[0][rows])
             outcome, data = information.update(H, R, _EMPTY, self._free, self._data, 0.0)
         if outcome != information.UPDATED:  # a singular innovation covariance
             return
         self._log.update(sensor, rows, t)
         self._data = data  # Joseph form
-        self.updates += 1
+        self._updates += 1
         self._report = None
 
     def report(self) -> ObservabilityReport | None:
         """The report now (None before :meth:`reset`, or when a recursion has broken down)."""
+        self._run_queue()
         if self._report is None and self._free is not None:
             self._report = self._compute()
         return self._report
@@ -300,7 +364,7 @@ class ObservabilityTracker:
         if not ok:
             return None
         d = int(np.count_nonzero(info < self.threshold))
-        return ObservabilityReport(d, vectors[:d], info, self.threshold, self.updates, self.elapsed,
+        return ObservabilityReport(d, vectors[:d], info, self.threshold, self._updates, self._elapsed,
                                    scale=s, eigenvectors=vectors)
 
 
@@ -338,6 +402,14 @@ class _Log:
 
     def __deepcopy__(self, memo) -> "_Log":
         return _Log(list(self.entries), self.full)
+
+
+class _Queue(list):
+    """Calls queued by :meth:`ObservabilityTracker.predict` and :meth:`~ObservabilityTracker.update`. Like the
+    log's entries they are never changed, so a copy of the tracker shares them (and their sensors)."""
+
+    def __deepcopy__(self, memo) -> "_Queue":
+        return _Queue(self)
 
 
 def _matrix(a) -> np.ndarray:

@@ -31,6 +31,36 @@ def weighted_mean(x: np.ndarray, w: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy")
+def _outside_block(x, start, limit, sums):
+    """Particles ``start`` to ``start + CHUNK`` of ``x`` whose component sum (in ``sums`` ``(CHUNK,)``, added
+    row after row as numpy's ``x.sum(axis=0)`` adds them) is not below ``limit`` in magnitude, or NaN."""
+    size = min(sums.size, x.shape[1] - start)
+    first = x[0, start:start + size]
+    for t in range(size):
+        sums[t] = first[t]
+    for a in range(1, x.shape[0]):
+        row = x[a, start:start + size]
+        for t in range(size):
+            sums[t] += row[t]
+    outside = 0
+    for t in range(size):
+        outside += 0 if abs(sums[t]) < limit else 1  # (an integer count: a branch would keep it scalar)
+    return outside
+
+
+@njit(cache=True, error_model="numpy")
+def count_outside(x: np.ndarray, limit: float) -> int:
+    """How many particles of the cloud ``x`` ``(n, N)`` have a component sum that is NaN or at least
+    ``limit`` in magnitude: ``(~(abs(x.sum(axis=0)) < limit)).sum()`` in one pass, without the ``(N,)``
+    temporaries."""
+    sums = np.empty(CHUNK)
+    outside = 0
+    for start in range(0, x.shape[1], CHUNK):
+        outside += _outside_block(x, start, limit, sums)
+    return outside
+
+
+@njit(cache=True, error_model="numpy")
 def _scaled_block(x, mean, w, start, root, scale):
     """Rows ``sqrt(w) (x - mean)`` of the particles ``start`` to ``start + CHUNK`` into ``root`` ``(n, CHUNK)``
     (``scale`` ``(CHUNK,)``: the square roots); returns how many particles the block has. Rows indexed
