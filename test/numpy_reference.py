@@ -220,3 +220,41 @@ def line_of_sight(x, station):
     d = x.T[:3] - station[:, None]
     h2 = d[0] * d[0] + d[1] * d[1]
     return d, np.sqrt(h2), np.sqrt(h2 + d[2] * d[2])
+
+
+def range_bearing_jacobian(d, horizontal, rho, min_horizontal=1e-3, min_range=1.0):
+    """``(3, 6, N)`` Jacobian of range, azimuth and elevation from the line of sight (at 7782d64)."""
+    hor = np.maximum(horizontal, min_horizontal)
+    inv_rho = 1.0 / np.maximum(rho, min_range)
+    inv_rho2 = inv_rho * inv_rho
+    jac = np.zeros((3, 6, d.shape[1]))
+    np.multiply(d, inv_rho, out=jac[0, :3])
+    inv_h2 = 1.0 / (hor * hor)
+    np.multiply(d[1], inv_h2, out=jac[1, 0])
+    np.negative(jac[1, 0], out=jac[1, 0])
+    np.multiply(d[0], inv_h2, out=jac[1, 1])
+    k = d[2] * inv_rho2
+    k /= -hor
+    np.multiply(k, d[0], out=jac[2, 0])
+    np.multiply(k, d[1], out=jac[2, 1])
+    np.multiply(hor, inv_rho2, out=jac[2, 2])
+    return jac
+
+
+def orthogonal_projection(H, r, w, regularization, columns):
+    """Shift ``(n, N)`` and ``a`` ``(N, k)`` of the Euclidean projection with a diagonal ``H_w H_w^T``
+    (``H`` ``(N, k, n)``, ``r`` ``(N, k)``, ``w`` the whitener's diagonal ``(k,)``; at 7782d64)."""
+    k = w.size
+    Hw = H.transpose(1, 2, 0)[:, columns]
+    rw = r.T * w[:, None]
+    S = np.einsum("icn,icn->in", Hw, Hw)
+    S *= (w * w)[:, None]
+    trace = S.sum(axis=0)
+    damping = trace * (regularization / k)
+    damping[trace <= 0.0] = 1.0
+    S += damping
+    a = rw / S
+    a[~np.isfinite(a)] = 0.0
+    shift = np.zeros((H.shape[2], H.shape[0]))
+    shift[columns] = np.einsum("icn,in->cn", Hw, a * w[:, None])
+    return shift, a.T

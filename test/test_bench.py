@@ -25,15 +25,19 @@ def test_bench_reports_every_filter_and_the_ratio_of_the_same_run(capsys):
         np.median(blocks[("gpf", 200)] / blocks[("spf", 200)]))
     assert report["gpf_over_paper_gpf"]["200"] == pytest.approx(
         np.median(blocks[("gpf", 200)] / blocks[("gpf-paper", 200)]))
-    if peer:
-        assert report["gpf_over_particles"]["200"] == pytest.approx(
-            np.median(blocks[("gpf", 200)] / blocks[("particles", 200)]))
-    else:
-        assert report["gpf_over_particles"] == {}
+    for key, numerator in (("gpf_over_particles", "gpf"), ("spf_over_particles", "spf"),
+                           ("paper_gpf_over_particles", "gpf-paper")):
+        if peer:
+            assert report[key]["200"] == pytest.approx(
+                np.median(blocks[(numerator, 200)] / blocks[("particles", 200)]))
+        else:
+            assert report[key] == {}
     expected = "retain_freed_memory" if allocator.retained else "default"
     assert report["machine"]["allocator"] == expected
     text = bench.format_table(report)
     assert "GPF/SPF: N=200:" in text and "GPF/GPF-paper: N=200:" in text and f"allocator: {expected}" in text
+    if peer:
+        assert "SPF/particles: N=200:" in text and "GPF-paper/particles: N=200:" in text
 
 
 @pytest.mark.skipif(platform.system() != "Linux" or platform.libc_ver()[0] != "glibc", reason="glibc only")

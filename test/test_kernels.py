@@ -14,8 +14,9 @@ import numpy_reference as reference
 from gpf_nav import resampling
 from gpf_nav.filters import BootstrapPF, GeometricProjectionPF, MultipleModelGPF
 from gpf_nav.filters.kernel import match_moments
+from gpf_nav.filters.projection import project, select_columns, select_rows
 from gpf_nav.linalg import positive_definite
-from gpf_nav.kernels import cloud, covariance, information, orbit
+from gpf_nav.kernels import bearing, cloud, covariance, information, orbit
 from gpf_nav.kernels import curvature as curvature_kernels
 from gpf_nav.kernels.curvature import departure, largest_scaled
 from gpf_nav.kernels.systematic import systematic_ancestors
@@ -184,6 +185,52 @@ def test_the_residual_and_the_line_of_sight_are_the_numpy_ones_bit_for_bit(count
     for states in (x, np.ascontiguousarray(x)):
         for got, expected in zip(model._line_of_sight(states), reference.line_of_sight(states, model.station)):
             np.testing.assert_array_equal(got, expected)
+
+
+@pytest.mark.parametrize("count", SIZES)
+def test_the_lunar_measurement_jacobian_is_the_numpy_one_bit_for_bit(count):
+    """Every entry, signed zeros included, at orbits with degenerate states (the station, its vertical,
+    NaN, inf) among them."""
+    rng = np.random.default_rng(95 + count)
+    model = LunarDescentModel(station=(1.7e6, 1e3, 2e3))
+    x = _orbits(rng, count)
+    if count >= 7:
+        x[:3, 4:7] = [[1.7e6, 1.7e6, np.inf], [1e3, 1e3, 0.0], [2e3, -5e5, 0.0]]
+    with np.errstate(invalid="ignore"):
+        d, horizontal, rho = model._line_of_sight(x.T)
+        got = bearing.range_bearing_jacobian(d, horizontal, rho, 1e-3, 1.0)
+        expected = reference.range_bearing_jacobian(d, horizontal, rho)
+    np.testing.assert_array_equal(got.view(np.int64), expected.view(np.int64))
+
+
+@pytest.mark.parametrize("count", SIZES)
+def test_the_orthogonal_projection_is_the_numpy_one_bit_for_bit(count):
+    """The shift (returned, or added into the particles) and the co-state increment of the lunar
+    measurement, every row or two of them, at orbits with degenerate states (the station: a zero
+    Jacobian; NaN) among them."""
+    rng = np.random.default_rng(97 + count)
+    model = LunarDescentModel(station=(1.7e6, 1e3, 2e3))
+    x = _orbits(rng, count)
+    if count >= 7:
+        x[:3, 4] = model.station
+    with np.errstate(invalid="ignore", divide="ignore"):
+        h, H = model.measure_and_jacobian(x.T)
+        r = model.residual(model.measure(x.T + rng.standard_normal((count, 6)) * 1e3), h)
+        full = 1.0 / np.sqrt(np.diag(model.measurement_noise()))
+        for rows, columns in ((np.array([True, True, True]), (0, 1, 2)), (np.array([True, False, True]), (0, 1, 2)),
+                              (np.array([True, True, True]), None)):
+            Hr, rr, w = select_rows(H, rows), select_columns(r, rows), full[rows]  # (the filters' layouts)
+            expected = reference.orthogonal_projection(Hr, rr, w, 1e-6, list(range(6)) if columns is None else
+                                                       list(columns))
+            for W in (w, np.diag(w)):
+                shift, a = project(Hr, rr, W, 1e-6, columns=columns, orthogonal_rows=True)
+                moved = x.copy()
+                assert project(Hr, rr, W, 1e-6, columns=columns, orthogonal_rows=True, out=moved)[0] is None
+                for got, want in ((shift, expected[0]), (a, expected[1]), (moved, x + expected[0])):
+                    if count == 1:  # the one-point Jacobian is row-major: einsum then sums along its rows
+                        _close(got, want, rtol=1e-15)
+                    else:
+                        np.testing.assert_array_equal(got.view(np.int64), want.view(np.int64))
 
 
 @pytest.mark.parametrize("count", SIZES)

@@ -11,10 +11,10 @@ is timed over a block of steps. The filters of one group (the particle filters o
 filters and the EnKF) run their blocks in turn, round after round, the order rotating each round, so a
 machine whose speed drifts (other work, CPU frequency) moves every filter of the group alike. The
 reported figure is a filter's median block time per step over ``--repeats`` rounds, after a warm-up; the
-GPF/SPF, GPF/GPF-paper and GPF/particles ratios are the medians over the rounds of the ratio of the two
-blocks of a round. ``gpf-nav bench`` runs with the heap tuning of :mod:`gpf_nav.allocator` (the report says whether
-it was applied); ``python -m gpf_nav.experiments.bench`` runs with the C library's default allocator, for
-comparison. ``--node`` runs the ROS node-latency benchmark instead (``gpf_nav.tools.latency``).
+ratios (:data:`RATIOS`: GPF/SPF, GPF/GPF-paper, GPF/particles, SPF/particles, GPF-paper/particles) are the
+medians over the rounds of the ratio of the two blocks of a round. ``gpf-nav bench`` runs with the heap
+tuning of :mod:`gpf_nav.allocator` (the report says whether it was applied); ``python -m
+gpf_nav.experiments.bench`` runs with the C library's default allocator, for comparison. ``--node`` runs the ROS node-latency benchmark instead (``gpf_nav.tools.latency``).
 """
 from __future__ import annotations
 
@@ -40,6 +40,11 @@ FILTERS = ("gpf", "gpf-paper", "gpf-single", "spf", PEER, "ekf", "ukf", "enkf")
 """The filters timed by default (registry names and :data:`PEER`), in table order."""
 ENSEMBLE_SIZE = 500
 """Members of an ensemble filter (the particle counts apply to the particle filters only)."""
+RATIOS = (("gpf_over_spf", "gpf", "spf"), ("gpf_over_paper_gpf", "gpf", "gpf-paper"),
+          ("gpf_over_particles", "gpf", PEER), ("spf_over_particles", "spf", PEER),
+          ("paper_gpf_over_particles", "gpf-paper", PEER))
+"""The ratios a report gives per particle count, each ``(report key, numerator, denominator)`` (filter
+names); a key is empty unless both filters ran."""
 
 
 def _maker(name: str, n: int | None):
@@ -111,14 +116,14 @@ def time_filter(make, scenario, model, steps: int, repeats: int, warmup: int = W
 
 def run(particle_counts=PARTICLE_COUNTS, repeats: int = 15, seed: int = 0, filters=FILTERS) -> dict:
     """Benchmark ``filters`` (registry names); returns ``{"results": [{"filter", "particles", "us_per_step", "blocks_us"
-    (per round)}, ...], "gpf_over_spf": {N: ratio},
-    "gpf_over_paper_gpf": {N: ratio}, "gpf_over_particles": {N: ratio} (empty without ``particles``),
-    "machine": ...}`` (module docstring)."""
+    (per round)}, ...], "gpf_over_spf": {N: ratio}, ... (one key per :data:`RATIOS` entry, each empty
+    unless both of its filters ran: those against ``particles`` without that library), "machine": ...}``
+    (module docstring)."""
     default = ScenarioConfig()
     config = replace(default, duration=default.dt * (WARMUP + repeats * STEPS + 1))
     scenario = generate(config, seed)
     model = filter_model(config)
-    results, ratios, paper, peer = [], {}, {}, {}
+    results, ratios = [], {key: {} for key, _, _ in RATIOS}
     for group in _groups(particle_counts, filters):
         n = max(count or 0 for _, count, _ in group)
         steps = STEPS if n <= 10_000 else 5 if n < LARGE else LARGE_STEPS
@@ -127,14 +132,17 @@ def run(particle_counts=PARTICLE_COUNTS, repeats: int = 15, seed: int = 0, filte
             results.append({"filter": name, "particles": count, "us_per_step": float(np.median(times)) * 1e6,
                             "blocks_us": [t * 1e6 for t in times]})
         by_name = {name: np.asarray(times) for (name, _, _), times in zip(group, blocks)}
-        if _particle_filter(group[0][0]) and "gpf" in by_name:
-            for other, ratio in (("spf", ratios), ("gpf-paper", paper), (PEER, peer)):
-                if other in by_name:
-                    ratio[str(n)] = float(np.median(by_name["gpf"] / by_name[other]))
-    return {"results": results, "gpf_over_spf": ratios, "gpf_over_paper_gpf": paper, "gpf_over_particles": peer,
+        if _particle_filter(group[0][0]):
+            for key, numerator, denominator in RATIOS:
+                if numerator in by_name and denominator in by_name:
+                    ratios[key][str(n)] = float(np.median(by_name[numerator] / by_name[denominator]))
+    return {"results": results, **ratios,
             "machine": {"python": platform.python_version(), "numpy": np.__version__,
                         "processor": platform.machine(),
                         "allocator": "retain_freed_memory" if allocator.retained else "default"}}
+
+
+_LABELS = {"gpf": "GPF", "spf": "SPF", "gpf-paper": "GPF-paper", PEER: "particles"}  # (in the table's ratios)
 
 
 def format_table(report: dict) -> str:
@@ -146,12 +154,10 @@ def format_table(report: dict) -> str:
         shown = f"{us:9.1f} us" if us < 1000 else f"{us / 1000:9.2f} ms"
         lines.append(f"{r['filter']:<10} {n:>8} {shown:>12}")
     lines.append("ratios (medians over rounds of blocks timed in turn):")
-    lines.append("GPF/SPF: " + ", ".join(f"N={n}: {v:.2f}" for n, v in report["gpf_over_spf"].items()))
-    lines.append("GPF/GPF-paper: " + ", ".join(f"N={n}: {v:.2f}"
-                                              for n, v in report["gpf_over_paper_gpf"].items()))
-    if report["gpf_over_particles"]:
-        lines.append("GPF/particles: " + ", ".join(f"N={n}: {v:.2f}"
-                                                  for n, v in report["gpf_over_particles"].items()))
+    for key, numerator, denominator in RATIOS:
+        if report.get(key):
+            lines.append(f"{_LABELS[numerator]}/{_LABELS[denominator]}: "
+                         + ", ".join(f"N={n}: {v:.2f}" for n, v in report[key].items()))
     lines.append(f"allocator: {report['machine']['allocator']}")
     return "\n".join(lines)
 

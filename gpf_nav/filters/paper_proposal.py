@@ -66,11 +66,14 @@ class ProjectionProposal(Proposal):
             r = sensor.residual(y, previous_y)[projected] - eta * dt
         # the projection H^T (H H^T + eps I)^-1 r and a = (H H^T + eps I)^-1 r, the co-state times dt
         metric_factor = pf._noise_factors(dt)[0] if self.metric == "process_noise" else None
+        # (weights by the likelihood only need no shift: it goes straight into the particles)
+        likelihood = self.weighting == "likelihood"
         shift, a = project(H, r, pf._whitening(projected, stage.fraction)[0], self.regularization,
-                           metric_factor, sensor.measured_state_index, sensor.orthogonal_jacobian_rows)
-        x += shift
-        if self.weighting == "likelihood":
+                           metric_factor, sensor.measured_state_index, sensor.orthogonal_jacobian_rows,
+                           out=x if likelihood else None)
+        if likelihood:
             return Move(x, 0.0, rows, a / dt, projected)
+        x += shift
         return Move(x, gaussian_shift_correction(shift, inverse_factor, z), rows, a / dt, projected)
 
     def reset(self) -> None:

@@ -26,6 +26,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from gpf_nav.kernels import projection as projection_kernels
 from gpf_nav.linalg import solve_spd
 from gpf_nav.sensors.sensor import Sensor
 
@@ -40,7 +41,8 @@ def innovation(sensor: Sensor, states: np.ndarray, y: np.ndarray, rows: np.ndarr
 
 def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float,
             metric_factor: np.ndarray | None = None, columns: tuple[int, ...] | None = None,
-            orthogonal_rows: bool = False) -> tuple[np.ndarray, np.ndarray]:
+            orthogonal_rows: bool = False, out: np.ndarray | None = None
+            ) -> tuple[np.ndarray | None, np.ndarray]:
     """Projection shift and whitened co-state increment.
 
     Args:
@@ -52,18 +54,16 @@ def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float,
         columns: the state components ``h`` depends on (other columns of ``H`` are zero); None: all.
         orthogonal_rows: the rows of ``H`` are mutually orthogonal (as for range, azimuth and
             elevation); with a diagonal ``W`` and the Euclidean metric ``H H^T`` is then diagonal and
-            the solve is a division.
+            the solve is a division, one compiled pass over the particles
+            (:func:`gpf_nav.kernels.projection.orthogonal_projection`).
+        out: particles ``(n, N)`` to add the shift to, in place (saves the ``(n, N)`` shift where the
+            caller needs only the shifted particles); None: the shift is returned.
 
     Returns:
-        ``shift`` ``(n, N)`` to add to the particles and ``a = (Hw Hw^T + eps I)^-1 W r`` ``(N, k)``
-        (the co-state times ``dt``, in whitened measurement coordinates).
+        ``shift`` ``(n, N)`` to add to the particles (None when added to ``out``) and
+        ``a = (Hw Hw^T + eps I)^-1 W r`` ``(N, k)`` (the co-state times ``dt``, in whitened measurement
+        coordinates).
     """
-    Ht = H.transpose(1, 2, 0)  # (k, n, N)
-    if metric_factor is not None:
-        Ht = np.einsum("kjn,jc->kcn", Ht, metric_factor)
-        columns = None
-    columns = _as_index(tuple(range(H.shape[2])) if columns is None else tuple(columns))
-    Ht = Ht[:, columns]
     k = W.shape[0]
     # With a diagonal whitener w, W H = diag(w) H is never formed: w goes into S and into a instead.
     if W.ndim == 1:
@@ -71,38 +71,50 @@ def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float,
     else:
         w = np.diag(W)
         diagonal = np.count_nonzero(W) == np.count_nonzero(w)
+    if orthogonal_rows and diagonal and metric_factor is None:
+        shifted = np.zeros((H.shape[2], H.shape[0])) if out is None else out
+        indices = _column_array(tuple(range(H.shape[2])) if columns is None else tuple(columns))
+        a = projection_kernels.orthogonal_projection(H.transpose(1, 2, 0), indices, r.T,
+                                                     np.asarray(w, dtype=float), regularization / k, shifted)
+        return (shifted if out is None else None), a.T
+    Ht = H.transpose(1, 2, 0)  # (k, n, N)
+    if metric_factor is not None:
+        Ht = np.einsum("kjn,jc->kcn", Ht, metric_factor)
+        columns = None
+    columns = _as_index(tuple(range(H.shape[2])) if columns is None else tuple(columns))
+    Ht = Ht[:, columns]
     if diagonal:
         Hw, rw = Ht, r.T * w[:, None]
     else:
         Hw, rw = np.einsum("ij,jcn->icn", W, Ht), W @ r.T
-    if orthogonal_rows and diagonal and metric_factor is None:
-        S = np.einsum("icn,icn->in", Hw, Hw)  # the diagonal of H_w H_w^T, (k, N)
-        S *= (w * w)[:, None]
-        trace = S.sum(axis=0)
-    else:
-        S = np.einsum("icn,jcn->ijn", Hw, Hw)
-        if diagonal:
-            S *= np.outer(w, w)[:, :, None]
-        trace = np.einsum("iin->n", S)
+    S = np.einsum("icn,jcn->ijn", Hw, Hw)
+    if diagonal:
+        S *= np.outer(w, w)[:, :, None]
     # relative Tikhonov term; a zero Jacobian (degenerate geometry) gets unit damping and a zero shift
     if metric_factor is None:
+        trace = np.einsum("iin->n", S)
         damping = trace * (regularization / k)
         damping[trace <= 0.0] = 1.0
     else:
-        damping = np.full_like(trace, regularization)
-    if S.ndim == 2:
-        S += damping
-        a = rw / S
-    else:
-        for i in range(k):
-            S[i, i] += damping
-        a = solve_spd(S, rw)
+        damping = np.full(S.shape[2], float(regularization))
+    for i in range(k):
+        S[i, i] += damping
+    a = solve_spd(S, rw)
     a[~np.isfinite(a)] = 0.0
     shift = np.zeros((H.shape[2], H.shape[0]))
     shift[columns] = np.einsum("icn,in->cn", Hw, a * w[:, None] if diagonal else a)
     if metric_factor is not None:
         shift = metric_factor @ shift
-    return shift, a.T
+    if out is None:
+        return shift, a.T
+    out += shift
+    return None, a.T
+
+
+@lru_cache(maxsize=64)
+def _column_array(columns: tuple[int, ...]) -> np.ndarray:
+    """``columns`` as the index array the compiled projection takes."""
+    return np.array(columns, dtype=np.int64)
 
 
 @lru_cache(maxsize=64)

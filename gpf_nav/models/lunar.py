@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from gpf_nav.kernels import orbit
+from gpf_nav.kernels import bearing, orbit
 from gpf_nav.models.gravity import GravityField
 from gpf_nav.models.state_space import StateSpaceModel
 
@@ -236,21 +236,9 @@ class LunarDescentModel(StateSpaceModel):
         return self._measure(*los), self._jacobian(*los)
 
     def _jacobian(self, d, horizontal, rho):
-        hor = np.maximum(horizontal, _MIN_HORIZONTAL)
-        inv_rho = 1.0 / np.maximum(rho, _MIN_RANGE)
-        inv_rho2 = inv_rho * inv_rho
-        jac = np.zeros((3, 6, d.shape[1]))
-        np.multiply(d, inv_rho, out=jac[0, :3])
-        inv_h2 = 1.0 / (hor * hor)
-        np.multiply(d[1], inv_h2, out=jac[1, 0])
-        np.negative(jac[1, 0], out=jac[1, 0])
-        np.multiply(d[0], inv_h2, out=jac[1, 1])
-        k = d[2] * inv_rho2
-        k /= -hor
-        np.multiply(k, d[0], out=jac[2, 0])
-        np.multiply(k, d[1], out=jac[2, 1])
-        np.multiply(hor, inv_rho2, out=jac[2, 2])
-        return jac.transpose(2, 0, 1)
+        """``H`` ``(N, 3, 6)`` from the line of sight (:func:`gpf_nav.kernels.bearing.range_bearing_jacobian`,
+        a view of its particle-last ``(3, 6, N)`` array)."""
+        return bearing.range_bearing_jacobian(d, horizontal, rho, _MIN_HORIZONTAL, _MIN_RANGE).transpose(2, 0, 1)
 
     def _point_jacobian(self, x: np.ndarray) -> np.ndarray:
         """:meth:`_jacobian` ``(1, 3, 6)`` at one state ``x`` ``(6,)``, in Python floats: at one point the
