@@ -307,21 +307,24 @@ def _rebuilt_one_call_at_a_time(tracker: ObservabilityTracker) -> tuple[np.ndarr
     ``transition_jacobian_along``, ``jacobian_along`` and the replay kernel)."""
     from gpf_nav.kernels import information
     log, model = tracker._log, tracker.model
+    store, k = log.store, log.predictions
+    steps = list(zip(store.dt[:k].tolist(), store.t[:k].tolist(), store.inputs[:k]))
     points = [tracker.reference[None]]
-    for dt, t, u in reversed(log.predictions):
+    for dt, t, u in reversed(steps):
         points.append(model.transition(points[-1], -dt, t + dt, u))
     points.reverse()
-    free, data, step = tracker._prior, tracker._prior.copy(), 0
-    for entry in log.entries:
+    free, data, step, j = tracker._prior, tracker._prior.copy(), 0, 0
+    for predicted in store.predicted[:log.size]:
         x = points[step]
-        if entry[0] is None:
-            _, dt, t, u = entry
+        if predicted:
+            dt, t, u = steps[step]
             F = np.ascontiguousarray(model.transition_jacobian(x, dt, t, u)[0])
             step += 1
             _, free, data = information.propagate(F, np.array(model.process_noise(dt, t)),
                                                   np.ascontiguousarray(points[step][0]), free, data)
         else:
-            sensor, rows, t = entry
+            sensor, rows, t = store.sensors[store.group[j]], store.rows[j, :store.count[j]], float(store.times[j])
+            j += 1
             H, R = sensor.jacobian(x, t)[0][rows], sensor.noise(t)[np.ix_(rows, rows)]
             outcome, updated = information.update(np.ascontiguousarray(H), np.ascontiguousarray(R), np.zeros(0),
                                                   free, data, 0.0)
@@ -334,9 +337,9 @@ def test_the_rebuild_gives_the_numbers_of_its_calls_one_at_a_time(kind):
     """A reanchoring's rebuild, batched (the reference carried back in one call, the Jacobians along the
     trajectory in one call per model and sensor, the recursions in one kernel), equals the calls one at a
     time bit for bit: with IMU inputs on some predictions and none on others, two step lengths, updates
-    with the azimuth masked, and a second sensor; a user model through the default (one call per state)."""
+    with the azimuth masked, and two more sensors; a user model through the default (one call per state)."""
     from gpf_nav.models.compensation import ModelErrorCompensation
-    from gpf_nav.sensors.kinematic import AltitudeSensor
+    from gpf_nav.sensors.kinematic import AltitudeSensor, VelocitySensor
     from gpf_nav.sensors.sensor import Padded
     rng = np.random.default_rng(5)
     if kind == "user model":
@@ -346,11 +349,11 @@ def test_the_rebuild_gives_the_numbers_of_its_calls_one_at_a_time(kind):
         config = ScenarioConfig(epsilon=0.0)
         model = filter_model(config)
         mean, cov = initial_state(config), np.diag([1e6, 1e6, 1e6, 1.0, 1.0, 1.0])
-        sensors = [AltitudeSensor(30.0)]
+        sensors = [AltitudeSensor(30.0), VelocitySensor(0.1)]
         if kind == "compensated lunar":
             model = ModelErrorCompensation(model)
             mean, cov = np.r_[mean, 1e-5, 0.0, -1e-5], np.diag(np.r_[np.diag(cov), 1e-8, 1e-8, 1e-8])
-            sensors = [Padded(sensors[0], 6, 9)]
+            sensors = [Padded(sensor, 6, 9) for sensor in sensors]
     sensors.insert(0, ModelSensor(model))
     tracker = ObservabilityTracker(model)
     tracker.reset(mean, cov)
@@ -372,7 +375,7 @@ def test_the_rebuild_gives_the_numbers_of_its_calls_one_at_a_time(kind):
     moved = tracker.reference * (1.0 + 1e-3 * rng.standard_normal(tracker.reference.size))
     tracker.reanchor(moved)
     free, data = _rebuilt_one_call_at_a_time(tracker)
-    assert tracker.reanchors == 1 and len(tracker._log.entries) > 100
+    assert tracker.reanchors == 1 and tracker._log.size > 100
     if kind != "user model":  # (a linear model's Jacobians do not depend on the reference)
         assert not np.array_equal(tracker._data, before)  # the rebuild moved the recursions
     assert np.array_equal(tracker._free, free) and np.array_equal(tracker._data, data)
@@ -382,3 +385,50 @@ def test_the_rebuild_cost_tool_times_a_full_log():
     from gpf_nav.tools import rebuild_cost
     row = rebuild_cost.measure("ekf-comp", 30, repeats=1)
     assert row["state"] == 9 and row["predictions"] == 30 and row["updates"] == 30 and row["rebuild_ms"] > 0
+
+
+def test_copies_of_a_tracker_share_their_log_and_diverge_without_touching_each_other():
+    """The estimator's history deep-copies filters: a copy shares the log's arrays, and a copy and its
+    original that go on differently (the copy first, then the original; a second copy of the copy) each
+    rebuild exactly as a tracker that saw only its own steps."""
+    import copy
+    from gpf_nav.sensors.kinematic import AltitudeSensor
+    config = ScenarioConfig(epsilon=0.0)
+    model = filter_model(config)
+    mean, cov = initial_state(config), np.diag([1e6, 1e6, 1e6, 1.0, 1.0, 1.0])
+    sensors = [ModelSensor(model), AltitudeSensor(30.0)]
+
+    def steps(tracker, first, last):
+        for k in range(first, last):
+            tracker.predict(2.0, 2.0 * k, None)
+            sensor = sensors[k % 3 == 0]
+            rows = np.ones(sensor.dim, bool)
+            rows[1:] = k % 2 == 0  # only the range on odd steps
+            tracker.update(sensor, sensor.measure(tracker.reference[None], 2.0 * (k + 1))[0], rows,
+                           2.0 * (k + 1), tracker.reference)
+
+    def fresh(*spans):
+        tracker = ObservabilityTracker(model)
+        tracker.reset(mean, cov)
+        for first, last in spans:
+            steps(tracker, first, last)
+        return tracker
+
+    original = fresh((0, 40))
+    copied = copy.deepcopy(original)
+    assert copied._log.store is original._log.store
+    steps(copied, 40, 90)  # in place: the original has not written past the copy
+    assert copied._log.store is original._log.store
+    steps(original, 100, 120)  # the copy wrote past the original: the original appends to its own prefix
+    assert copied._log.store is not original._log.store
+    second = copy.deepcopy(copied)
+    steps(second, 200, 210)
+    steps(copied, 300, 305)
+    for tracker, spans in ((original, [(0, 40), (100, 120)]), (copied, [(0, 40), (40, 90), (300, 305)]),
+                           (second, [(0, 40), (40, 90), (200, 210)])):
+        oracle = fresh(*spans)
+        assert tracker._log.size == oracle._log.size
+        moved = tracker.reference * (1.0 + 1e-4)
+        for t in (tracker, oracle):
+            t.reanchor(moved)
+        assert np.array_equal(tracker._free, oracle._free) and np.array_equal(tracker._data, oracle._data)

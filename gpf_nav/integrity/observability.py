@@ -29,6 +29,7 @@ measurement functions and the dynamics can see), not about how far the estimate 
 """
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, field
 
@@ -199,14 +200,13 @@ class ObservabilityTracker:
         reference now: carried back through the logged predictions (``transition_chain``), then forward
         through the log, the Jacobians along it in one call each (the model's ``transition_jacobian_along``,
         each sensor's ``jacobian_along``) and the recursions in one kernel
-        (:func:`~gpf_nav.kernels.information.replay`)."""
+        (:func:`~gpf_nav.kernels.information.replay`). What does not depend on the reference (steps, rows,
+        noises) was kept by the log as it grew (:class:`_Log`)."""
         log = self._log
         if log is None or log.full:
             return
-        predictions = log.predictions
-        dt = np.array([p[0] for p in predictions], dtype=float)
-        t = np.array([p[1] for p in predictions], dtype=float)
-        u = [p[2] for p in predictions]
+        k, store = log.predictions, log.store
+        dt, t, u = store.dt[:k], store.t[:k], store.inputs[:k]
         with np.errstate(all="ignore"):
             try:  # (K + 1, n): the state before each prediction, then the reference
                 trajectory = self.model.transition_chain(self._reference, -dt[::-1], (t + dt)[::-1], u[::-1])[::-1]
@@ -215,14 +215,11 @@ class ObservabilityTracker:
         if not np.isfinite(trajectory).all():
             return
         n = trajectory.shape[1]
-        predicted = np.array([entry[0] is None for entry in log.entries], dtype=bool)
-        at = np.cumsum(predicted) - predicted  # the trajectory's point each entry is linearised at
         F = self.model.transition_jacobian_along(trajectory[:-1], dt, t, u) if u else np.zeros((0, n, n))
         Q = self._noise_along(dt, t, n)
-        H, R, rows = self._logged_updates(trajectory[at[~predicted]],
-                                          [entry for entry in log.entries if entry[0] is not None], n)
-        self._free, self._data = information.replay(_matrix(self._prior), predicted, _matrix(F), _matrix(Q),
-                                                    _matrix(trajectory[1:]), H, R, rows)
+        H, R, rows = self._logged_updates(log, trajectory, n)
+        self._free, self._data = information.replay(_matrix(self._prior), store.predicted[:log.size], _matrix(F),
+                                                    _matrix(Q), _matrix(trajectory[1:]), H, R, rows)
 
     def _noise_along(self, dt: np.ndarray, t: np.ndarray, n: int) -> np.ndarray:
         """``Q`` ``(K, n, n)`` of each logged prediction (once per distinct ``dt`` when it does not depend on
@@ -235,32 +232,28 @@ class ObservabilityTracker:
                         dtype=float).reshape(-1, n, n)[index.ravel()]
 
     @staticmethod
-    def _logged_updates(x: np.ndarray, updates: list, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The measured rows' Jacobians at ``x`` ``(M, n)`` and noises of the logged ``updates`` (``(sensor,
-        rows, t)``), padded to the largest: ``H`` ``(M, r, n)``, ``R`` ``(M, r, r)`` and the rows used
-        ``(M,)``; each sensor's Jacobians in one call."""
-        by_sensor: dict[int, list[int]] = {}
-        for j, (sensor, _, _) in enumerate(updates):
-            by_sensor.setdefault(id(sensor), []).append(j)
-        groups, count = [], np.zeros(len(updates), dtype=np.int64)
-        for members in map(np.array, by_sensor.values()):
-            masks = np.array([updates[j][1] for j in members], dtype=bool)  # (G, m)
-            groups.append((updates[members[0]][0], members, masks))
-            count[members] = masks.sum(axis=1)
-        width = int(count.max()) if count.size else 0
-        H, R = np.zeros((len(updates), width, n)), np.zeros((len(updates), width, width))
-        for sensor, members, masks in groups:
-            times = [updates[j][2] for j in members]
-            jacobians = sensor.jacobian_along(x[members], np.array(times, dtype=float))  # (G, m, n)
-            m = masks.shape[1]
-            noises = np.array([sensor.noise(t) for t in times], dtype=float).reshape(len(members), m, m)
-            patterns, which = np.unique(masks, axis=0, return_inverse=True)
-            for pattern, rows in enumerate(patterns):  # the updates that measured the same rows, together
-                index, measured = np.flatnonzero(which.ravel() == pattern), np.flatnonzero(rows)
-                c = measured.size
-                H[members[index], :c] = jacobians[index][:, measured]
-                R[members[index], :c, :c] = noises[index][:, measured][:, :, measured]
-        return H, R, count
+    def _logged_updates(log: _Log, trajectory: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The measured rows' Jacobians and noises of the ``M`` logged updates, linearised along
+        ``trajectory`` ``(K + 1, n)`` and padded to the most rows measured, ``r``: ``H`` ``(M, r, n)``, ``R``
+        ``(M, r, r)`` and the rows used ``(M,)``. Each sensor's Jacobians in one call, its updates in log
+        order; the kernel reads only the first ``rows[j]`` rows of each, so the padding rows of ``H``
+        repeat a measured one."""
+        m, store = log.updates, log.store
+        group, count = store.group[:m], store.count[:m]
+        width = int(count.max()) if m else 0
+        # the updates sorted by sensor (stably: each sensor's in log order), so that a sensor's are a slice
+        order, sizes = np.argsort(group, kind="stable"), np.bincount(group)
+        end = np.cumsum(sizes)
+        x, times = trajectory[store.at[:m][order]], store.times[:m][order]
+        calls = [(start, stop, sensor.jacobian_along(x[start:stop], times[start:stop]))  # (G, m_s, n)
+                 for sensor, start, stop in zip(store.sensors, end - sizes, end) if stop > start]
+        full = np.empty((m, max((jacobians.shape[1] for *_, jacobians in calls), default=0), n))
+        for start, stop, jacobians in calls:
+            full[start:stop, :jacobians.shape[1]] = jacobians
+        position = np.empty(m, dtype=np.int64)  # of each update in the sorted order
+        position[order] = np.arange(m)
+        H = full[position[:, None], store.rows[:m, :width]]
+        return H, _matrix(store.noise[:m, :width, :width]), count
 
     def predict(self, dt: float, t: float, u=None) -> None:
         """Carry both recursions and the reference over ``dt`` from time ``t`` with the input ``u`` (queued:
@@ -336,7 +329,7 @@ class ObservabilityTracker:
             outcome, data = information.update(H, R, _EMPTY, self._free, self._data, 0.0)
         if outcome != information.UPDATED:  # a singular innovation covariance
             return
-        self._log.update(sensor, rows, t)
+        self._log.update(sensor, rows, t, R)
         self._data = data  # Joseph form
         self._updates += 1
         self._report = None
@@ -372,36 +365,121 @@ _EMPTY = np.zeros(0)
 
 
 class _Log:
-    """The predictions ``(None, dt, t, u)`` and updates ``(sensor, rows, t)`` since the prior, in order, up
-    to :data:`REBUILD_LOG` (then :attr:`full`, and no longer kept). Its entries are never changed, so a
-    copy of the filter (the estimator's late-measurement history) shares them: copying it copies the
-    list only."""
+    """The predictions and updates since the prior, in order, up to :data:`REBUILD_LOG` (then :attr:`full`,
+    and no longer kept), with what a rebuild needs of them that does not depend on the reference, kept as
+    they come (a rebuild then reads arrays, not entries): :attr:`store`'s first :attr:`size` entries,
+    :attr:`predictions` predictions and :attr:`updates` updates.
 
-    def __init__(self, entries: list | None = None, full: bool = False):
-        self.entries = [] if entries is None else entries
-        self.full = full
+    A copy of the filter (the estimator's late-measurement history) shares the store: entries are never
+    changed, only appended, so a log appends in place while it is the one that wrote the store's last
+    entry, and otherwise (a copy that went on, then this one) appends to a copy of its own prefix first.
+    Copying a log costs nothing; diverging copies one prefix."""
 
-    @property
-    def predictions(self) -> list[tuple]:
-        """``(dt, t, u)`` of every logged prediction, in order."""
-        return [entry[1:] for entry in self.entries if entry[0] is None]
+    def __init__(self):
+        self.store: _Store | None = _Store()
+        self.size = self.predictions = self.updates = 0
+        self.full = False
 
     def predict(self, dt: float, t: float, u) -> None:
-        self._add((None, float(dt), float(t), None if u is None else np.array(u, dtype=float)))
+        """Log a prediction over ``dt`` from ``t`` with the input ``u`` (None: none)."""
+        store = self._writable()
+        if store is not None:
+            store.predict(self.size, self.predictions, float(dt), float(t),
+                          None if u is None else np.array(u, dtype=float))
+            self.size, self.predictions = self.size + 1, self.predictions + 1
 
-    def update(self, sensor, rows: np.ndarray, t: float) -> None:
-        self._add((sensor, rows.copy(), float(t)))
+    def update(self, sensor, rows: np.ndarray, t: float, R: np.ndarray) -> None:
+        """Log an update of ``sensor``'s measured ``rows`` ``(m,)`` bool at ``t``, their noise ``R``
+        ``(r, r)``."""
+        store = self._writable()
+        if store is not None:
+            store.update(self.size, self.updates, sensor, np.flatnonzero(rows), float(t), R, self.predictions)
+            self.size, self.updates = self.size + 1, self.updates + 1
 
-    def _add(self, entry: tuple) -> None:
+    def _writable(self) -> _Store | None:
+        """The store to append to, or None (:attr:`full`)."""
         if self.full:
-            return
-        if len(self.entries) >= REBUILD_LOG:
-            self.full, self.entries = True, []
-            return
-        self.entries.append(entry)
+            return None
+        if self.size >= REBUILD_LOG:
+            self.full, self.store = True, None
+            return None
+        if self.store.size != self.size:  # a copy of this log wrote past it
+            self.store = self.store.prefix(self.size, self.predictions, self.updates)
+        return self.store
 
     def __deepcopy__(self, memo) -> "_Log":
-        return _Log(list(self.entries), self.full)
+        return copy.copy(self)
+
+
+class _Store:
+    """The arrays of :class:`_Log`, whose first rows are its entries (capacity doubled as it grows).
+
+    Attributes:
+        size: entries written.
+        predicted: ``(E,)`` whether each entry is a prediction (else an update).
+        dt, t: ``(K,)`` each prediction's step and start, s; ``inputs`` its input (None: none).
+        sensors: the distinct sensors of the updates, in order of first use (held: their ids stay theirs).
+        group: ``(M,)`` each update's sensor (index into ``sensors``).
+        at: ``(M,)`` the predictions before each update: its point of the trajectory.
+        times: ``(M,)`` each update's time, s.
+        count: ``(M,)`` the rows each update measured; ``rows`` ``(M, D)`` which (padded with 0).
+        noise: ``(M, D, D)`` their noise ``R``, in the first ``count`` rows and columns.
+    """
+
+    _ARRAYS = ("predicted", "dt", "t", "group", "at", "times", "count", "rows", "noise")
+
+    def __init__(self, capacity: int = 64):
+        self.size = 0
+        self.predicted = np.zeros(capacity, dtype=bool)
+        self.dt, self.t, self.times = np.zeros(capacity), np.zeros(capacity), np.zeros(capacity)
+        self.group, self.at, self.count = (np.zeros(capacity, dtype=np.int64) for _ in range(3))
+        self.rows, self.noise = np.zeros((capacity, 0), dtype=np.int64), np.zeros((capacity, 0, 0))
+        self.inputs: list = []
+        self.sensors: list = []
+        self._groups: dict[int, int] = {}
+
+    def prefix(self, size: int, predictions: int, updates: int) -> _Store:
+        """A copy holding the first ``size`` entries (of which ``predictions`` predictions)."""
+        out = copy.copy(self)
+        for name in self._ARRAYS:
+            setattr(out, name, getattr(self, name).copy())
+        out.size, out.inputs = size, self.inputs[:predictions]
+        out.sensors, out._groups = list(self.sensors), dict(self._groups)
+        return out
+
+    def predict(self, e: int, k: int, dt: float, t: float, u: np.ndarray | None) -> None:
+        """Write entry ``e``, prediction ``k``."""
+        self._room(e, 0)
+        self.predicted[e], self.dt[k], self.t[k] = True, dt, t
+        self.inputs.append(u)
+        self.size = e + 1
+
+    def update(self, e: int, j: int, sensor, rows: np.ndarray, t: float, R: np.ndarray, at: int) -> None:
+        """Write entry ``e``, update ``j``: the measured ``rows`` ``(r,)`` of ``sensor`` and their noise ``R``
+        ``(r, r)``, at trajectory point ``at``."""
+        r = rows.size
+        self._room(e, r)
+        group = self._groups.get(id(sensor))
+        if group is None:
+            group = self._groups[id(sensor)] = len(self.sensors)
+            self.sensors.append(sensor)
+        self.predicted[e], self.group[j], self.at[j], self.times[j], self.count[j] = False, group, at, t, r
+        self.rows[j, :r], self.rows[j, r:] = rows, 0
+        self.noise[j, :r, :r] = R
+        self.size = e + 1
+
+    def _room(self, e: int, r: int) -> None:
+        """Grow the arrays to hold entry ``e`` (there are fewer predictions and updates than entries) and
+        ``r`` measured rows."""
+        capacity, width = self.predicted.size, self.rows.shape[1]
+        if e < capacity and r <= width:
+            return
+        capacity, width = 2 * capacity if e >= capacity else capacity, max(r, width)
+        for name in self._ARRAYS:
+            old = getattr(self, name)
+            new = np.zeros((capacity,) + (width,) * (old.ndim - 1), dtype=old.dtype)
+            new[(slice(0, old.shape[0]),) + tuple(slice(0, d) for d in old.shape[1:])] = old
+            setattr(self, name, new)
 
 
 class _Queue(list):

@@ -78,6 +78,9 @@ class StateComponentSensor(Sensor):
     def jacobian(self, x, t=0.0):
         return np.broadcast_to(_selection(self.index, x.shape[1]), (x.shape[0], self.dim, x.shape[1]))
 
+    def jacobian_along(self, x, t):
+        return self.jacobian(x)  # (the same selection at every state and time)
+
     def noise(self, t=0.0):
         return self._R
 
