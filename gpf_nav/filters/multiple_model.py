@@ -29,15 +29,11 @@ Each cycle is Blom's interacting multiple model (IMM):
    (:attr:`ParticleFilter.log_likelihood`, exact for the GPF's corrected weights). When the members
    did not weigh the same measurement (one gated a component, or re-initialised), ``mu = c``.
 4. **Nesting gate** (``nesting_gate`` > 0): the widest member's model contains every other's, so its
-   posterior should admit their estimates. The evidence of a member whose estimate of the user's state
-   lies outside the widest member's chi-square gate (``d^T P^-1 d`` above the ``nesting_gate``
-   quantile, ``n`` degrees of freedom) is withheld for that update: it keeps its predicted probability
-   ``c_j``, and the admitted members share the rest, ``sum_{admitted} c_i``, by their evidence. Where
-   the data cannot see a direction (no azimuth), a narrow, fast member explains the error it leaves
-   there with a wrong state and would otherwise win. The gate does not zero such a member: the widest
-   member's posterior is not always the better one (a gross measurement error that passed the
-   innovation gate can bend its acceleration state and narrow it), and a probability of 0 could only
-   climb back at the chain's switching rate, ``1 / switch_time``.
+   posterior should admit their estimates. A member whose estimate of the user's state lies outside
+   the widest member's chi-square gate (``d^T P^-1 d`` above the ``nesting_gate`` quantile, ``n``
+   degrees of freedom) gets probability 0 for that update, whatever its evidence: where the data
+   cannot see a direction (no azimuth), a narrow, fast member explains the error it leaves there with
+   a wrong state and would otherwise win.
 
 The estimate is the mixture ``sum_j mu_j N(m_j, P_j)`` (mean and covariance of the user's state); the
 unmodelled acceleration is the mixture of the compensated members' and the nominal model's zero.
@@ -78,7 +74,7 @@ COMPENSATION_TIMES = (0.02, 0.002, 1.0)
 orbit, the middle one a thrust that turns, the widest one learns a constant mismatch and keeps it."""
 NESTING_GATE = 0.999
 """Probability of the chi-square gate by which the widest member's posterior must admit a narrower
-member's estimate for that member's evidence to count (0: no gate). Without it, where the data
+member's estimate for that member to keep its probability (0: no gate). Without it, where the data
 cannot see a direction (no azimuth) a small, fast member explains the error left there with a wrong
 state and wins the evidence."""
 
@@ -196,16 +192,15 @@ class MultipleModelGPF(Composite):
         for member in self.members:
             member.update(y, sensor)
         comparable = all((m.gated, m.recoveries) == b for m, b in zip(self.members, before))
-        mu = predicted = self._predicted_probabilities
+        mu = self._predicted_probabilities
         if comparable:
-            admitted = self._nested() if self.nesting_gate > 0.0 else np.ones(mu.size, dtype=bool)
-            evidence = np.array([m.log_likelihood for m in self.members])[admitted]
-            posterior = predicted[admitted] * np.exp(evidence - evidence.max())
+            evidence = np.array([m.log_likelihood for m in self.members])
+            posterior = mu * np.exp(evidence - evidence.max())
             if np.isfinite(posterior).all() and posterior.sum() > 0.0:  # else the data cannot tell them apart
-                mu = predicted.copy()
-                mu[admitted] = posterior
-                if not admitted.all():  # the gated members keep their predicted share (step 4)
-                    mu[admitted] *= predicted[admitted].sum() / posterior.sum()
+                mu = posterior
+        if self.nesting_gate > 0.0:
+            admitted = np.where(self._nested(), mu, 0.0)
+            mu = admitted if admitted.sum() > 0.0 else np.eye(mu.size)[-1]
         self.model_probabilities = mu / mu.sum()
         self._predicted_probabilities = self.model_probabilities
         self._mix_due = True
