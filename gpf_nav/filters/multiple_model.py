@@ -33,7 +33,10 @@ Each cycle is Blom's interacting multiple model (IMM):
    the widest member's chi-square gate (``d^T P^-1 d`` above the ``nesting_gate`` quantile, ``n``
    degrees of freedom) gets probability 0 for that update, whatever its evidence: where the data
    cannot see a direction (no azimuth), a narrow, fast member explains the error it leaves there with
-   a wrong state and would otherwise win.
+   a wrong state and would otherwise win. Zeroed, not merely denied this update's evidence: a refused
+   member keeping its probability keeps its wrong state in the mixture. The cost: when the widest
+   member is the wrong one (an early gross outlier absorbed by its acceleration), the better members
+   return only at the chain's switching rate.
 
 The estimate is the mixture ``sum_j mu_j N(m_j, P_j)`` (mean and covariance of the user's state); the
 unmodelled acceleration is the mixture of the compensated members' and the nominal model's zero.
