@@ -26,7 +26,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from gpf_nav.kernels import projection as projection_kernels
+from gpf_nav.kernels import diagonal_projection
 from gpf_nav.linalg import solve_spd
 from gpf_nav.sensors.sensor import Sensor
 
@@ -55,7 +55,7 @@ def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float,
         orthogonal_rows: the rows of ``H`` are mutually orthogonal (as for range, azimuth and
             elevation); with a diagonal ``W`` and the Euclidean metric ``H H^T`` is then diagonal and
             the solve is a division, one compiled pass over the particles
-            (:func:`gpf_nav.kernels.projection.orthogonal_projection`).
+            (:func:`gpf_nav.kernels.diagonal_projection.orthogonal_projection`).
         out: particles ``(n, N)`` to add the shift to, in place (saves the ``(n, N)`` shift where the
             caller needs only the shifted particles); None: the shift is returned.
 
@@ -74,7 +74,7 @@ def project(H: np.ndarray, r: np.ndarray, W: np.ndarray, regularization: float,
     if orthogonal_rows and diagonal and metric_factor is None:
         shifted = np.zeros((H.shape[2], H.shape[0])) if out is None else out
         indices = _column_array(tuple(range(H.shape[2])) if columns is None else tuple(columns))
-        a = projection_kernels.orthogonal_projection(H.transpose(1, 2, 0), indices, r.T,
+        a = diagonal_projection.orthogonal_projection(H.transpose(1, 2, 0), indices, r.T,
                                                      np.asarray(w, dtype=float), regularization / k, shifted)
         return (shifted if out is None else None), a.T
     Ht = H.transpose(1, 2, 0)  # (k, n, N)

@@ -2,8 +2,8 @@
 (mutually orthogonal Jacobian rows, a diagonal whitener): per particle, a division instead of a solve.
 
 One pass over blocks of :data:`~gpf_nav.kernels.CHUNK` particles: the diagonal ``S``, its trace, the
-relative damping, the co-state increment ``a`` and the shift, added straight into the particles. The numpy
-code formed ``S``, the trace, ``a`` and the shift as whole ``(k, N)`` and ``(n, N)`` arrays; here each
+relative damping, the co-state increment ``a`` and the shift, added straight into the particles, without
+the whole ``(k, N)`` and ``(n, N)`` temporaries of the numpy reference (``test/numpy_reference.py``). Each
 particle's sums are the ones numpy's ``einsum`` and ``sum(axis=0)`` form on the particle-last Jacobians
 the models build (from 0, term after term in order), so the numbers are the numpy ones bit for bit.
 """
