@@ -264,7 +264,7 @@ def _as_input(u):
     if u is None:
         return None
     u = np.asarray(u, dtype=float)
-    return None if not np.any(u) else u
+    return u if u.any() else None  # (the method: np.any's dispatch costs more than the test at every call)
 
 
 def _input_matrix(u: list) -> np.ndarray:
