@@ -1,9 +1,9 @@
 """``gpf-nav bench``: per-step cost (one ``predict`` + one ``update``) of every filter on the lunar model.
 
 The filters are :mod:`gpf_nav.registry` entries, by name (default :data:`FILTERS`): ``gpf`` is the
-default (navigation-grade) configuration, the multiple-model GPF (two GPFs of N particles each),
-``gpf-paper`` the paper's, ``gpf-single`` one navigation-grade GPF of N particles on the compensated model
-(the default before the multiple model), ``spf`` the bootstrap PF without its diagnostic co-state, and
+default (navigation-grade) configuration, the multiple-model GPF (a nominal and three compensated GPFs of N
+particles each), ``gpf-paper`` the paper's, ``gpf-single`` one navigation-grade GPF of N particles on the
+compensated model, ``spf`` the bootstrap PF without its diagnostic co-state, and
 ``particles`` N. Chopin's bootstrap filter on the same model when that library is installed
 (:mod:`gpf_nav.experiments.peer_particles`; skipped otherwise).
 Each filter runs on the same seeded lunar-descent measurements, each step on the next measurement. A step
