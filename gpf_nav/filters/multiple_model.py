@@ -149,7 +149,6 @@ class MultipleModelGPF(Composite):
             for stream, scale, time in zip(stream_of, scales, times))
         self.compensated = self.scaled[-1]
         self.nesting_gate = float(nesting_gate)
-        self._nesting_limit = float(chi2.ppf(nesting_gate, model.state_dim)) if nesting_gate else math.inf
         self.compensation_scales, self.compensation_times = scales, times
         self.switch_time = float(switch_time)
         self.model_probabilities = np.full(len(self.members), 1.0 / len(self.members))
@@ -210,10 +209,21 @@ class MultipleModelGPF(Composite):
 
     def _nested(self) -> np.ndarray:
         """``(K,)`` bool: the members whose estimate of the user's state the widest member's posterior
-        admits (step 4 of the module docstring); the widest always."""
+        admits along the directions the data left undetermined (step 4 of the module docstring); the
+        widest always, and every member when the data determined every direction."""
+        admitted = np.ones(len(self.members), dtype=bool)
+        report = self.observability
+        if report is None or report.determined:
+            return admitted
         mean, cov = self.compensated.mean, self.compensated.covariance
-        distances = [float(d @ np.linalg.solve(cov, d)) for d in (m.mean - mean for m in self.members[:-1])]
-        return np.append(np.array(distances) <= self._nesting_limit, True)
+        scale = np.sqrt(cov.diagonal())
+        basis, _ = np.linalg.qr((report.directions / scale).T)  # (n, d) in the widest's standard deviations
+        spread = basis.T @ (cov / np.outer(scale, scale)) @ basis
+        limit = chi2.ppf(self.nesting_gate, basis.shape[1])
+        for j, member in enumerate(self.members[:-1]):
+            z = basis.T @ ((member.mean - mean) / scale)
+            admitted[j] = float(z @ np.linalg.solve(spread, z)) <= limit
+        return admitted
 
     def _mix(self, p: float) -> None:
         """IMM mixing with switching probability ``p`` (module docstring, step 1)."""
