@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from gpf_nav.filters import GeometricProjectionPF, MultipleModelGPF
+from gpf_nav.models import LinearGaussianModel
 from linear_reference import kalman, simulate
 from test_compensation import SIGMA, TAU, _kalman_of_augmented, augmented_linear, constant_velocity
 
@@ -134,32 +135,51 @@ def test_only_the_nominal_member_is_mixed():
     assert not np.allclose(f.nominal.mean, nominal_alone.mean)
 
 
-def test_a_member_the_widest_one_does_not_admit_loses_its_probability():
-    """The widest member's model contains every other's, so its posterior covers what they may be: a
-    narrower member whose estimate lies outside its chi-square gate is wrong whatever its evidence (as a
-    small member that explains an unobservable error locally). Pushed 10 widest standard deviations
-    away, the narrow member keeps a good part of its probability without the gate and none with it."""
-    ys = simulate(constant_velocity(), MEAN, 40, 1.0, seed=16)
+def planar_constant_velocity():
+    """2-D constant velocity ``[px, py, vx, vy]``, both positions measurable."""
+    A = np.zeros((4, 4))
+    A[0, 2] = A[1, 3] = 1.0
+    G = np.zeros((4, 2))
+    G[2, 0] = G[3, 1] = 0.1
+    model = LinearGaussianModel(A=A, G=G, C=np.eye(2, 4), R=np.eye(2))
+    model.position_index, model.velocity_index = (0, 1), (2, 3)
+    return model
 
-    def pushed(gate):
-        f = MultipleModelGPF(constant_velocity(), 500, seed=1, unmodelled_acceleration_std=SIGMA,
+
+def test_a_member_the_widest_one_does_not_admit_where_the_data_cannot_see_loses_its_probability():
+    """The widest member's model contains every other's, so along what the data have not determined its
+    posterior covers what they may be: a narrower member outside its chi-square gate there is wrong
+    whatever its evidence (a small member that explains an unobservable error locally). With ``py``
+    never measured, ``(py, vy)`` is undetermined: a narrow member pushed 10 widest standard deviations
+    along ``py`` keeps a good part of its probability without the gate and none with it; pushed along
+    the measured ``px``, towards data that agree with it, the gate leaves it to its evidence."""
+    ys = simulate(planar_constant_velocity(), np.array([0.0, 0.0, 1.0, 1.0]), 40, 1.0, seed=16)
+    ys[:, 1] = np.nan
+
+    def pushed(gate, axis):
+        f = MultipleModelGPF(planar_constant_velocity(), 500, seed=1, unmodelled_acceleration_std=SIGMA,
                              unmodelled_acceleration_time=TAU, compensation_scales=(0.01, 1.0),
                              compensation_times=(1.0, 1.0), nesting_gate=gate)
-        f.initialize(MEAN, COV)
+        f.initialize(np.array([0.0, 0.0, 1.0, 1.0]), np.diag([4.0, 4.0, 1.0, 1.0]))
         for y in ys[:-1]:
             f.predict(1.0)
             f.update(y)
+        assert np.allclose(f.observability.directions[:, [0, 2]], 0.0, atol=1e-6)  # (py, vy) only
         narrow = f.scaled[0]
         sd = np.sqrt(np.diag(f.compensated.covariance))
-        shift = np.append(10.0 * sd, 0.0)
+        shift = np.zeros(6)
+        shift[axis] = 10.0 * sd[axis]
         narrow.set_moments(narrow.augmented_mean + shift, narrow.augmented_covariance)
         before = f.model_probabilities[1]
+        y = ys[-1].copy()
+        y[0] += shift[0]  # data that agree with the pushed member where they see
         f.predict(1.0)
-        f.update(ys[-1] + 10.0 * sd[0])  # data that agree with the pushed member's position
+        f.update(y)
         return before, f.model_probabilities[1]
 
-    before, kept = pushed(0.0)
+    before, kept = pushed(0.0, 1)
     assert before > 0.3 and kept > 0.2
-    assert pushed(0.999)[1] == 0.0
+    assert pushed(0.999, 1)[1] == 0.0
+    assert pushed(0.999, 0)[1] > 0.2
     with pytest.raises(ValueError, match="nesting_gate"):
         MultipleModelGPF(constant_velocity(), nesting_gate=1.0)
