@@ -29,14 +29,16 @@ Each cycle is Blom's interacting multiple model (IMM):
    (:attr:`ParticleFilter.log_likelihood`, exact for the GPF's corrected weights). When the members
    did not weigh the same measurement (one gated a component, or re-initialised), ``mu = c``.
 4. **Nesting gate** (``nesting_gate`` > 0): the widest member's model contains every other's, so its
-   posterior should admit their estimates. A member whose estimate of the user's state lies outside
-   the widest member's chi-square gate (``d^T P^-1 d`` above the ``nesting_gate`` quantile, ``n``
-   degrees of freedom) gets probability 0 for that update, whatever its evidence: where the data
-   cannot see a direction (no azimuth), a narrow, fast member explains the error it leaves there with
-   a wrong state and would otherwise win. Zeroed, not merely denied this update's evidence: a refused
-   member keeping its probability keeps its wrong state in the mixture. The cost: when the widest
-   member is the wrong one (an early gross outlier absorbed by its acceleration), the better members
-   return only at the chain's switching rate.
+   posterior should admit their estimates where the data cannot check them. Along the directions of the
+   user's state the data have left undetermined (the observability report, :attr:`observability`),
+   a member whose estimate lies outside the widest member's chi-square gate (the ``nesting_gate``
+   quantile, one degree of freedom per direction, in the widest member's standard deviations) gets
+   probability 0 for that update, whatever its evidence: where the data cannot see a direction (no
+   azimuth), a narrow, fast member explains the error it leaves there with a wrong state and would
+   otherwise win. Zeroed, not merely denied this update's evidence: a refused member keeping its
+   probability keeps its wrong state in the mixture. Along determined directions the evidence judges
+   alone, so when every direction is determined the gate never fires: there a gross outlier the
+   widest member absorbed in its acceleration would otherwise let it refuse the better members.
 
 The estimate is the mixture ``sum_j mu_j N(m_j, P_j)`` (mean and covariance of the user's state); the
 unmodelled acceleration is the mixture of the compensated members' and the nominal model's zero.
@@ -77,9 +79,9 @@ COMPENSATION_TIMES = (0.02, 0.002, 1.0)
 orbit, the middle one a thrust that turns, the widest one learns a constant mismatch and keeps it."""
 NESTING_GATE = 0.999
 """Probability of the chi-square gate by which the widest member's posterior must admit a narrower
-member's estimate for that member to keep its probability (0: no gate). Without it, where the data
-cannot see a direction (no azimuth) a small, fast member explains the error left there with a wrong
-state and wins the evidence."""
+member's estimate, along the directions the data left undetermined, for that member to keep its
+probability (0: no gate). Without it, where the data cannot see a direction (no azimuth) a small, fast
+member explains the error left there with a wrong state and wins the evidence."""
 
 
 class MultipleModelGPF(Composite):
