@@ -28,17 +28,18 @@ Each cycle is Blom's interacting multiple model (IMM):
 3. **Model probabilities** ``mu_j ∝ c_j p(y | j)``, ``p(y | j)`` the member's incremental evidence
    (:attr:`ParticleFilter.log_likelihood`, exact for the GPF's corrected weights). When the members
    did not weigh the same measurement (one gated a component, or re-initialised), ``mu = c``.
-4. **Nesting gate** (``nesting_gate`` > 0): the widest member's model contains every other's, so its
-   posterior should admit their estimates where the data cannot check them. Along the directions of the
-   user's state the data have left undetermined (the observability report, :attr:`observability`),
-   a member whose estimate lies outside the widest member's chi-square gate (the ``nesting_gate``
-   quantile, one degree of freedom per direction, in the widest member's standard deviations) gets
-   probability 0 for that update, whatever its evidence: where the data cannot see a direction (no
-   azimuth), a narrow, fast member explains the error it leaves there with a wrong state and would
-   otherwise win. Zeroed, not merely denied this update's evidence: a refused member keeping its
-   probability keeps its wrong state in the mixture. Along determined directions the evidence judges
-   alone, so when every direction is determined the gate never fires: there a gross outlier the
-   widest member absorbed in its acceleration would otherwise let it refuse the better members.
+4. **Nesting gate** (``nesting_gate`` > 0), while the data leave a direction of the user's state
+   undetermined (the observability report, :attr:`observability`): the widest member's model contains
+   every other's, so its posterior should admit their estimates. A member whose estimate of the user's
+   state lies outside the widest member's chi-square gate (``d^T P^-1 d`` above the ``nesting_gate``
+   quantile, ``n`` degrees of freedom) gets probability 0 for that update, whatever its evidence: where
+   the data cannot see a direction (no azimuth), a narrow, fast member explains the error it leaves
+   there with a wrong state and would otherwise win, and the dynamics carry that wrong state into the
+   directions the data do see, so the gate is on the whole state. Zeroed, not merely denied this
+   update's evidence: a refused member keeping its probability keeps its wrong state in the mixture.
+   When the data determine every direction the evidence checks every member along all of them and the
+   gate is off: there the widest member can be the wrong one (an early gross outlier absorbed in its
+   acceleration), and a gate would let it refuse the better members.
 
 The estimate is the mixture ``sum_j mu_j N(m_j, P_j)`` (mean and covariance of the user's state); the
 unmodelled acceleration is the mixture of the compensated members' and the nominal model's zero.
@@ -79,8 +80,8 @@ COMPENSATION_TIMES = (0.02, 0.002, 1.0)
 orbit, the middle one a thrust that turns, the widest one learns a constant mismatch and keeps it."""
 NESTING_GATE = 0.999
 """Probability of the chi-square gate by which the widest member's posterior must admit a narrower
-member's estimate, along the directions the data left undetermined, for that member to keep its
-probability (0: no gate). Without it, where the data cannot see a direction (no azimuth) a small, fast
+member's estimate for that member to keep its probability, while the data leave a direction undetermined
+(0: no gate). Without it, where the data cannot see a direction (no azimuth) a small, fast
 member explains the error left there with a wrong state and wins the evidence."""
 
 
@@ -151,6 +152,7 @@ class MultipleModelGPF(Composite):
             for stream, scale, time in zip(stream_of, scales, times))
         self.compensated = self.scaled[-1]
         self.nesting_gate = float(nesting_gate)
+        self._nesting_limit = float(chi2.ppf(nesting_gate, model.state_dim)) if nesting_gate else math.inf
         self.compensation_scales, self.compensation_times = scales, times
         self.switch_time = float(switch_time)
         self.model_probabilities = np.full(len(self.members), 1.0 / len(self.members))
@@ -211,21 +213,14 @@ class MultipleModelGPF(Composite):
 
     def _nested(self) -> np.ndarray:
         """``(K,)`` bool: the members whose estimate of the user's state the widest member's posterior
-        admits along the directions the data left undetermined (step 4 of the module docstring); the
-        widest always, and every member when the data determined every direction."""
-        admitted = np.ones(len(self.members), dtype=bool)
+        admits (step 4 of the module docstring); the widest always, and every member when the data have
+        determined every direction."""
         report = self.observability
-        if report is None or report.determined:
-            return admitted
+        if report is not None and report.determined:
+            return np.ones(len(self.members), dtype=bool)
         mean, cov = self.compensated.mean, self.compensated.covariance
-        scale = np.sqrt(cov.diagonal())
-        basis, _ = np.linalg.qr((report.directions / scale).T)  # (n, d) in the widest's standard deviations
-        spread = basis.T @ (cov / np.outer(scale, scale)) @ basis
-        limit = chi2.ppf(self.nesting_gate, basis.shape[1])
-        for j, member in enumerate(self.members[:-1]):
-            z = basis.T @ ((member.mean - mean) / scale)
-            admitted[j] = float(z @ np.linalg.solve(spread, z)) <= limit
-        return admitted
+        distances = [float(d @ np.linalg.solve(cov, d)) for d in (m.mean - mean for m in self.members[:-1])]
+        return np.append(np.array(distances) <= self._nesting_limit, True)
 
     def _mix(self, p: float) -> None:
         """IMM mixing with switching probability ``p`` (module docstring, step 1)."""
