@@ -146,17 +146,19 @@ def planar_constant_velocity():
     return model
 
 
-def test_a_member_the_widest_one_does_not_admit_where_the_data_cannot_see_loses_its_probability():
-    """The widest member's model contains every other's, so along what the data have not determined its
-    posterior covers what they may be: a narrower member outside its chi-square gate there is wrong
+def test_a_member_the_widest_one_does_not_admit_loses_its_probability_while_a_direction_is_undetermined():
+    """The widest member's model contains every other's, so while the data leave a direction undetermined
+    its posterior covers what they may be: a narrower member outside its chi-square gate is wrong
     whatever its evidence (a small member that explains an unobservable error locally). With ``py``
     never measured, ``(py, vy)`` is undetermined: a narrow member pushed 10 widest standard deviations
-    along ``py`` keeps a good part of its probability without the gate and none with it; pushed along
-    the measured ``px``, towards data that agree with it, the gate leaves it to its evidence."""
-    ys = simulate(planar_constant_velocity(), np.array([0.0, 0.0, 1.0, 1.0]), 40, 1.0, seed=16)
-    ys[:, 1] = np.nan
+    along ``py`` keeps a good part of its probability without the gate and none with it. With both
+    positions measured every direction is determined, and a member pushed along ``px`` towards data
+    that agree with it is left to its evidence."""
+    truth = simulate(planar_constant_velocity(), np.array([0.0, 0.0, 1.0, 1.0]), 40, 1.0, seed=16)
+    partial = truth.copy()
+    partial[:, 1] = np.nan
 
-    def pushed(gate, axis):
+    def pushed(gate, axis, ys):
         f = MultipleModelGPF(planar_constant_velocity(), 500, seed=1, unmodelled_acceleration_std=SIGMA,
                              unmodelled_acceleration_time=TAU, compensation_scales=(0.01, 1.0),
                              compensation_times=(1.0, 1.0), nesting_gate=gate)
@@ -164,22 +166,21 @@ def test_a_member_the_widest_one_does_not_admit_where_the_data_cannot_see_loses_
         for y in ys[:-1]:
             f.predict(1.0)
             f.update(y)
-        assert np.allclose(f.observability.directions[:, [0, 2]], 0.0, atol=1e-6)  # (py, vy) only
         narrow = f.scaled[0]
         sd = np.sqrt(np.diag(f.compensated.covariance))
         shift = np.zeros(6)
         shift[axis] = 10.0 * sd[axis]
         narrow.set_moments(narrow.augmented_mean + shift, narrow.augmented_covariance)
         before = f.model_probabilities[1]
-        y = ys[-1].copy()
-        y[0] += shift[0]  # data that agree with the pushed member where they see
         f.predict(1.0)
-        f.update(y)
-        return before, f.model_probabilities[1]
+        f.update(ys[-1] + shift[:2])  # data that agree with the pushed member where they see
+        return f, before, f.model_probabilities[1]
 
-    before, kept = pushed(0.0, 1)
+    f, before, kept = pushed(0.0, 1, partial)
+    assert np.allclose(f.observability.directions[:, [0, 2]], 0.0, atol=1e-6)  # (py, vy) only
     assert before > 0.3 and kept > 0.2
-    assert pushed(0.999, 1)[1] == 0.0
-    assert pushed(0.999, 0)[1] > 0.2
+    assert pushed(0.999, 1, partial)[2] == 0.0
+    f, _, kept = pushed(0.999, 0, truth)
+    assert f.observability.determined and kept > 0.2
     with pytest.raises(ValueError, match="nesting_gate"):
         MultipleModelGPF(constant_velocity(), nesting_gate=1.0)
