@@ -164,10 +164,13 @@ def test_installed_simulator_and_estimator_processes_track_truth(workspace):
                            env=env, cwd=workspace, stdout=est_log, stderr=subprocess.STDOUT)
     sim = None
     try:
-        deadline = time.monotonic() + 60.0
+        # a fresh install compiles the filter's kernels before the node comes up (a minute or more on a
+        # busy machine): the simulator starts only once the estimator is there to hear it
+        deadline = time.monotonic() + 600.0
         while time.monotonic() < deadline and node.count_publishers("odometry/filtered") == 0:
             assert est.poll() is None, (logs / "estimator.log").read_text()
             executor.spin_once(timeout_sec=0.1)
+        assert node.count_publishers("odometry/filtered") > 0, (logs / "estimator.log").read_text()
         sim = subprocess.Popen([str(lib / "simulator"), "--ros-args", "--params-file", str(share / "simulator.yaml"),
                                 "-p", "rate_factor:=25.0", "-p", "scenario.duration:=120.0",
                                 "-p", "start_delay:=2.0", "-p", "truth_rate:=0.0", "-p", "imu_rate:=0.0"],
