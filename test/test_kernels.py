@@ -23,6 +23,7 @@ from gpf_nav.kernels.systematic import systematic_ancestors
 from gpf_nav.models.compensation import ModelErrorCompensation
 from gpf_nav.models.lunar import MU_MOON, LunarDescentModel
 from gpf_nav.models.state_space import wrapped_residual
+from gpf_nav.sensors.model import ModelSensor
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 
 RTOL = 1e-12
@@ -201,6 +202,35 @@ def test_the_lunar_measurement_jacobian_is_the_numpy_one_bit_for_bit(count):
         got = bearing.range_bearing_jacobian(d, horizontal, rho, 1e-3, 1.0)
         expected = reference.range_bearing_jacobian(d, horizontal, rho)
     np.testing.assert_array_equal(got.view(np.int64), expected.view(np.int64))
+
+
+@pytest.mark.parametrize("count", SIZES)
+def test_the_lunar_measurement_residual_is_the_numpy_one_bit_for_bit(count):
+    """``y - h(x)`` and ``h(x) - y`` in one kernel against the numpy measurement and residual, serial and
+    parallel: azimuths on both sides of the cut (every angle wrapped), none near it (none wrapped), a
+    component not measured (NaN: every angle wrapped), degenerate states; and through the compensated
+    model and its sensor."""
+    rng = np.random.default_rng(97 + count)
+    model = LunarDescentModel(station=(1.7e6, 1e3, 2e3))
+    x = _orbits(rng, count)
+    across = np.array([1.0e5, np.pi - 1e-3, 0.2])
+    ahead = np.array([1.0e5, 0.1, 0.2])
+    with np.errstate(invalid="ignore"):
+        for y in (across, ahead, np.array([1.0e5, np.nan, 0.2])):
+            for reverse in (False, True):
+                h = model.measure(x.T)
+                expected = model.residual(h, y) if reverse else model.residual(y, h)
+                got = model.measurement_residual(y, x.T, 0.0, reverse)
+                np.testing.assert_array_equal(got.view(np.int64), expected.view(np.int64))
+                parallel = np.empty((3, count))
+                bearing._residual_parallel(x[:3], model.station, y, reverse, parallel)
+                np.testing.assert_array_equal(parallel.view(np.int64), got.T.view(np.int64))
+        compensated = ModelErrorCompensation(model, 1e6, 0.1)
+        augmented = np.ascontiguousarray(np.vstack([x, rng.standard_normal((3, count))]))
+        expected = model.residual(across, model.measure(x.T))
+        for owner in (compensated, ModelSensor(compensated)):
+            np.testing.assert_array_equal(owner.measurement_residual(across, augmented.T, 0.0).view(np.int64),
+                                          expected.view(np.int64))
 
 
 @pytest.mark.parametrize("count", SIZES)

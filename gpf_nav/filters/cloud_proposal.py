@@ -131,7 +131,7 @@ class CloudProposal(Proposal):
         the kernel ``centres`` ``(n, N)``."""
         sensor = pf._sensor
         H = sensor.jacobian(mean[None], pf.time)[0]
-        r = sensor.residual(stage.y, sensor.measure(centres.T, pf.time))
+        r = sensor.measurement_residual(stage.y, centres.T, pf.time)
         return H, r
 
     def _whitened(self, pf: GeometricProjectionPF, H: np.ndarray, r: np.ndarray, rows: np.ndarray,

@@ -89,12 +89,12 @@ class Flattening:
         x = np.ascontiguousarray(x)
         m, lags = self.measured.size, len(self.steps)
         nu = np.empty((x.shape[1], m * (1 + lags)))  # the times side by side, each written in place
-        departure(sensor.residual(sensor.measure(states, t), self.measured[None]), x, self.mean,
+        departure(sensor.measurement_residual(self.measured, states, t, reverse=True), x, self.mean,
                   np.ascontiguousarray(self.jacobian), nu, 0)
         for lag, (step, (measured, jacobian)) in enumerate(zip(self.steps, self.ahead), 1):
             states = self.model.transition(states, step, t, self.input)
             t += step
-            departure(sensor.residual(sensor.measure(states, t), measured[None]), x, self.mean,
+            departure(sensor.measurement_residual(measured, states, t, reverse=True), x, self.mean,
                       np.ascontiguousarray(jacobian), nu, lag * m)
         return nu if self.rows.all() else nu[:, np.tile(self.rows, 1 + lags)]
 

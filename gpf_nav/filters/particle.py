@@ -445,7 +445,7 @@ class ParticleFilter(Filter):
         in flattened coordinates ``flat``, of the measurement linearised at the cloud's mean (the
         particle's own measurement once mapped back)."""
         if flat is None:
-            e = self._sensor.residual(y, self._sensor.measure(x.T, self.time)).T  # (m, N)
+            e = self._sensor.measurement_residual(y, x.T, self.time).T  # (m, N)
         else:
             e = flat.residual(y, x)
         return log_likelihood(e, rows, self._whitening(rows, fraction))

@@ -286,6 +286,9 @@ class ModelErrorCompensation(StateSpaceModel):
     def residual(self, y, y_pred):
         return self.base.residual(y, y_pred)
 
+    def measurement_residual(self, y, x, t=0.0, reverse=False):
+        return self.base.measurement_residual(y, x[:, :self._n], t, reverse)
+
     def measurement_mean(self, y, weights):
         return self.base.measurement_mean(y, weights)
 

@@ -219,6 +219,12 @@ class LunarDescentModel(StateSpaceModel):
     def measure(self, x):
         return self._measure(*self._line_of_sight(x))
 
+    def measurement_residual(self, y, x, t=0.0, reverse=False):
+        """:meth:`measure`, its residual and the angles' wrapping in one kernel
+        (:func:`gpf_nav.kernels.bearing.range_bearing_residual`; ``h`` does not depend on ``t``)."""
+        r = np.ascontiguousarray(x.T[:3], dtype=float)
+        return bearing.range_bearing_residual(r, self.station, np.asarray(y, dtype=float).reshape(3), reverse).T
+
     def measurement_jacobian(self, x):
         if x.shape[0] == 1:  # one point (the GPF linearises at its cloud's mean)
             return self._point_jacobian(x[0])

@@ -60,5 +60,8 @@ class ModelSensor(Sensor):
     def residual(self, y, h):
         return self.model.residual(y, h)
 
+    def measurement_residual(self, y, x, t=0.0, reverse=False):
+        return self.model.measurement_residual(y, x, t, reverse)
+
     def measurement_mean(self, y, weights):
         return self.model.measurement_mean(y, weights)

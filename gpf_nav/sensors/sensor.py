@@ -117,6 +117,14 @@ class Sensor(ABC):
         """``y - h`` with the angular components wrapped to (-pi, pi]; shapes broadcast."""
         return wrapped_residual(y, h, self.angular)
 
+    def measurement_residual(self, y: np.ndarray, x: np.ndarray, t: float = 0.0, reverse: bool = False
+                             ) -> np.ndarray:
+        """The residual ``(N, m)`` of the measurement ``y`` ``(m,)`` at the states ``x`` ``(N, n)``:
+        :meth:`residual` of ``y`` and :meth:`measure`, or, ``reverse``, of :meth:`measure` and ``y`` (``h(x) -
+        y``). A sensor overrides it to do both in one pass, with the same numbers."""
+        h = self.measure(x, t)
+        return self.residual(h, y) if reverse else self.residual(y, h)
+
     def measurement_mean(self, y: np.ndarray, weights: np.ndarray) -> np.ndarray:
         """Weighted mean ``(m,)`` of measurements ``(K, m)`` with weights ``(K,)``; angles circular."""
         return measurement_mean(y, weights, self.angular)
