@@ -30,7 +30,7 @@ from scipy.stats import chi2
 
 from gpf_nav import registry
 from gpf_nav.arguments import CommandParser, positive_float, positive_int
-from gpf_nav.experiments import metrics
+from gpf_nav.experiments import metrics, plots
 from gpf_nav.experiments.montecarlo import git_commit, parse_filters, write_json
 from gpf_nav.experiments.parallel import map_tasks
 from gpf_nav.experiments.runner import make_filter, run_seeds
@@ -283,11 +283,7 @@ def markdown(report: dict) -> str:
 def draw_figure(report: dict, figure: dict, path: Path) -> Path:
     """Position and velocity error against time (RMS over runs), rae only and full suite, with the mean
     altitude on the top axis."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = plots.pyplot()
     times, altitude = figure["times"], figure["altitude"]
     fig, axes = plt.subplots(1, 2, figsize=(13.0, 5.0), layout="constrained")
     colours = ["#000000", "#bcbd22", "#1f77b4", "#d62728"]
@@ -311,10 +307,7 @@ def draw_figure(report: dict, figure: dict, path: Path) -> Path:
     s = report["settings"]
     fig.suptitle(f"Range/azimuth/elevation only against the full sensor suite: RMS of {s['runs']} runs "
                  f"(the grey line starts the second half)", fontsize=10)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return plots.save(fig, path)
 
 
 def main(argv: list[str] | None = None) -> int:
