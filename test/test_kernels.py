@@ -233,6 +233,20 @@ def test_the_lunar_measurement_residual_is_the_numpy_one_bit_for_bit(count):
                                           expected.view(np.int64))
 
 
+class _OffsetRange(LunarDescentModel):
+    """A user's lunar model with a measurement of its own (a range offset)."""
+
+    def measure(self, x, t=0.0):
+        return super().measure(x, t) + np.array([50.0, 0.0, 0.0])
+
+
+def test_a_lunar_model_with_its_own_measurement_gets_its_own_residual():
+    x = _orbits(np.random.default_rng(98), 20)
+    model, y = _OffsetRange(), np.array([1.0e5, 0.1, 0.2])
+    np.testing.assert_array_equal(model.measurement_residual(y, x.T), model.residual(y, model.measure(x.T)))
+    assert not np.array_equal(model.measurement_residual(y, x.T), LunarDescentModel().measurement_residual(y, x.T))
+
+
 @pytest.mark.parametrize("count", SIZES)
 def test_the_orthogonal_projection_is_the_numpy_one_bit_for_bit(count):
     """The shift (returned, or added into the particles) and the co-state increment of the lunar

@@ -221,7 +221,10 @@ class LunarDescentModel(StateSpaceModel):
 
     def measurement_residual(self, y, x, t=0.0, reverse=False):
         """:meth:`measure`, its residual and the angles' wrapping in one kernel
-        (:func:`gpf_nav.kernels.bearing.range_bearing_residual`; ``h`` does not depend on ``t``)."""
+        (:func:`gpf_nav.kernels.bearing.range_bearing_residual`; ``h`` does not depend on ``t``); a subclass
+        with a measurement or residual of its own gets the two calls."""
+        if type(self).measure is not LunarDescentModel.measure or type(self).residual is not LunarDescentModel.residual:
+            return super().measurement_residual(y, x, t, reverse)
         r = np.ascontiguousarray(x.T[:3], dtype=float)
         return bearing.range_bearing_residual(r, self.station, np.asarray(y, dtype=float).reshape(3), reverse).T
 
