@@ -37,6 +37,18 @@ def systematic(weights, uniform):
     return np.repeat(np.arange(n), counts)
 
 
+def normalise(logw):
+    """``(log-sum-exp, normalised log-weights, weights)`` of ``logw`` (NaN set to -inf in place), or None
+    when the peak is not finite."""
+    logw[np.isnan(logw)] = -np.inf
+    peak = logw.max()
+    if not -np.inf < peak < np.inf:
+        return None
+    total = peak + np.log(np.exp(logw - peak).sum())
+    normalised = logw - total
+    return float(total), normalised, np.exp(normalised)
+
+
 def _acceleration(r, gm, u):
     r2 = np.einsum("ij,ij->j", r, r)
     np.maximum(r2, MIN_RANGE_SQ, out=r2)

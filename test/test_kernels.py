@@ -16,7 +16,7 @@ from gpf_nav.filters import BootstrapPF, GeometricProjectionPF, MultipleModelGPF
 from gpf_nav.filters.kernel import match_moments
 from gpf_nav.filters.projection import project, select_columns, select_rows
 from gpf_nav.linalg import positive_definite
-from gpf_nav.kernels import bearing, cloud, covariance, information, orbit
+from gpf_nav.kernels import bearing, cloud, covariance, information, log_weights, orbit
 from gpf_nav.kernels import curvature as curvature_kernels
 from gpf_nav.kernels.curvature import departure, largest_scaled
 from gpf_nav.kernels.systematic import systematic_ancestors
@@ -82,6 +82,31 @@ def test_the_count_of_particles_beyond_the_state_limit_is_the_numpy_one(count):
         hit = rng.integers(0, count, 3)
         x[0, hit[0]], x[rows - 1, hit[1]], x[:, hit[2]] = np.nan, np.inf, 0.9e150
         assert cloud.count_outside(x, 1e150) == np.count_nonzero(~(np.abs(x.sum(axis=0)) < 1e150))
+
+
+@pytest.mark.parametrize("count", (*SIZES, 8, 128, 129, 1037, 70_001))  # numpy's summation blocks
+def test_the_log_weight_normalisation_is_the_numpy_one_bit_for_bit(count):
+    """The log-sum-exp in numpy's pairwise order, with NaN, zero and dominant weights; every weight zero
+    or one infinite gives NaN and writes nothing."""
+    rng = np.random.default_rng(60 + count)
+    for case in range(-4, 4):
+        logw = rng.standard_normal(count) * (30.0 if case >= 0 else 1.0)  # (weights alike: the order shows)
+        if case in (1, 2):
+            logw[rng.random(count) < 0.5] = np.nan if case == 1 else -np.inf
+            logw[-1] = 0.0  # at least one weight
+        elif case == 3:
+            logw[rng.integers(count)] = 1e3
+        expected = reference.normalise(logw.copy())
+        normalised, weights = np.full(count, 7.0), np.full(count, 7.0)
+        total = log_weights.normalise(logw, normalised, weights)
+        assert total == expected[0]
+        np.testing.assert_array_equal(normalised, expected[1])
+        np.testing.assert_array_equal(weights, expected[2])
+        assert not np.isnan(logw).any()  # set to -inf in place, as the numpy code did
+    for empty in (np.full(count, -np.inf), np.full(count, np.nan), np.r_[np.zeros(count - 1), np.inf]):
+        untouched = np.full(count, 7.0)
+        assert np.isnan(log_weights.normalise(empty, untouched, untouched))
+        assert (untouched == 7.0).all()
 
 
 @pytest.mark.parametrize("count", SIZES)

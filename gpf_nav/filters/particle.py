@@ -21,6 +21,8 @@ includes the pending ``Q``.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from gpf_nav import resampling as resamplers
@@ -31,7 +33,7 @@ from gpf_nav.filters.kernel import map_moments, weighted_moments
 from gpf_nav.filters.likelihood import Whitening, log_likelihood
 from gpf_nav.filters.proposal import PriorProposal, Proposal, Stage
 from gpf_nav.filters.tempering_schedule import Tempering
-from gpf_nav.kernels import cloud
+from gpf_nav.kernels import cloud, log_weights
 from gpf_nav.linalg import cholesky_or_none, positive_definite, psd_sqrt
 from gpf_nav.models.state_space import StateSpaceModel
 from gpf_nav.sensors.sensor import Sensor
@@ -385,15 +387,14 @@ class ParticleFilter(Filter):
 
     def _normalise(self, logw: np.ndarray) -> float | None:
         """Set the weights from unnormalised log-weights ``(N,)`` (NaN counts as zero weight) and
-        return their log-sum-exp; None, changing nothing, when every weight is zero or NaN."""
-        logw[np.isnan(logw)] = -np.inf
-        peak = logw.max()
-        if not -np.inf < peak < np.inf:
+        return their log-sum-exp; None, changing nothing, when every weight is zero or NaN
+        (:func:`gpf_nav.kernels.log_weights.normalise`: new arrays, so weights handed out stay as they were)."""
+        normalised, weights = np.empty(logw.size), np.empty(logw.size)
+        total = log_weights.normalise(np.ascontiguousarray(logw, dtype=float), normalised, weights)
+        if math.isnan(total):
             return None
-        total = peak + np.log(np.exp(logw - peak).sum())
-        self._logw = logw - total
-        self._weights = np.exp(self._logw)
-        return float(total)
+        self._logw, self._weights = normalised, weights
+        return total
 
     def _check_collapse(self) -> None:
         if not self.collapse_steps:
