@@ -184,3 +184,32 @@ def test_a_member_the_widest_one_does_not_admit_loses_its_probability_while_a_di
     assert f.observability.determined and kept > 0.2
     with pytest.raises(ValueError, match="nesting_gate"):
         MultipleModelGPF(constant_velocity(), nesting_gate=1.0)
+
+
+def test_a_member_that_refuses_a_component_takes_the_lowest_evidence_and_the_others_still_weigh():
+    """One member's gate refuses a component: the others' evidence still moves the probabilities, and the
+    refusing member is weighed as the least probable of them; when every member refuses, nothing moves."""
+    f = MultipleModelGPF(constant_velocity(), 200, seed=0, unmodelled_acceleration_std=SIGMA,
+                         unmodelled_acceleration_time=TAU, compensation_scales=(0.01, 1.0),
+                         compensation_times=(1.0, 1.0), nesting_gate=0.0)
+    f.initialize(MEAN, COV)
+    f.predict(1.0)
+
+    def scripted(member, evidence, refuses):
+        def update(y, sensor=None):
+            member.log_likelihood = evidence
+            member.gated += refuses
+        return update
+
+    def weigh(evidences, refusals):
+        prior = f.model_probabilities.copy()
+        for member, evidence, refuses in zip(f.members, evidences, refusals):
+            member.update = scripted(member, evidence, refuses)
+        f.update(np.array([0.0]))
+        return prior, f.model_probabilities
+
+    prior, mu = weigh((0.0, 50.0, -3.0), (0, 1, 0))  # the middle member refuses: it gets -3, the lowest
+    expected = prior * np.exp(np.array([0.0, -3.0, -3.0]))
+    np.testing.assert_allclose(mu, expected / expected.sum(), rtol=1e-12)
+    prior, mu = weigh((0.0, 50.0, -3.0), (1, 1, 1))  # every member refused: the probabilities stay
+    np.testing.assert_allclose(mu, prior, rtol=1e-12)

@@ -26,8 +26,13 @@ Each cycle is Blom's interacting multiple model (IMM):
    probable, so a small, slowly observable force is never learnt.
 2. Each member predicts and updates on its own model.
 3. **Model probabilities** ``mu_j ∝ c_j p(y | j)``, ``p(y | j)`` the member's incremental evidence
-   (:attr:`ParticleFilter.log_likelihood`, exact for the GPF's corrected weights). When the members
-   did not weigh the same measurement (one gated a component, or re-initialised), ``mu = c``.
+   (:attr:`ParticleFilter.log_likelihood`, exact for the GPF's corrected weights). A member that did
+   not weigh the whole measurement (its gate refused a component, or it re-initialised) has no
+   evidence comparable with the others': it takes the lowest of theirs, since it found the measurement
+   no more probable than the least of the members that used it. Leaving every probability at ``c``
+   instead would let one member that cannot follow the data (the 1e-3 m/s² member under the paper's
+   9 % mismatch refuses a component in a quarter of the updates) stop the others' evidence. When every
+   member refused, ``mu = c``.
 4. **Nesting gate** (``nesting_gate`` > 0), while the data leave a direction of the user's state
    undetermined (the observability report, :attr:`observability`): the widest member's model contains
    every other's, so its posterior should admit their estimates. A member whose estimate of the user's
@@ -203,10 +208,11 @@ class MultipleModelGPF(Composite):
         before = [(m.gated, m.recoveries) for m in self.members]
         for member in self.members:
             member.update(y, sensor)
-        comparable = all((m.gated, m.recoveries) == b for m, b in zip(self.members, before))
+        refused = np.array([(m.gated, m.recoveries) != b for m, b in zip(self.members, before)])
         mu = self._predicted_probabilities
-        if comparable:
+        if not refused.all():
             evidence = np.array([m.log_likelihood for m in self.members])
+            evidence[refused] = evidence[~refused].min()  # (step 3 of the module docstring)
             posterior = mu * np.exp(evidence - evidence.max())
             if np.isfinite(posterior).all() and posterior.sum() > 0.0:  # else the data cannot tell them apart
                 mu = posterior
