@@ -3,8 +3,9 @@ their Jacobian.
 
 The residual is the measurement, its residual and the angles' wrapping
 (:func:`gpf_nav.models.state_space.wrapped_residual`) in one pass over the particles, without the
-``(N, 3)`` temporaries of the numpy code; ``math.atan2`` is the C library's, as ``np.arctan2`` is, so the
-result is the numpy one bit for bit. The Jacobian is built from the line of sight
+``(N, 3)`` temporaries of the numpy code; ``math.atan2`` is the C library's, as ``np.arctan2`` is where
+numpy has no SIMD version of its own (x86-64 without AVX-512), so there the result is the numpy one bit for
+bit, elsewhere equal to rounding (``test_kernels`` checks which). The Jacobian is built from the line of sight
 (:func:`gpf_nav.kernels.orbit.line_of_sight`) with the numpy code's operations, one particle at a time: no
 transcendental function, so it too is the numpy one bit for bit. One pass writes every entry, the zero
 ones included, instead of zeroing the ``(3, 6, N)`` array first and filling it row by row.
