@@ -38,6 +38,9 @@ class BiasedSensor(Padded):
         h, H = super().measure_and_jacobian(x, t)
         return self._add(h, x), H
 
+    # the biased measurement, then its residual (the sensor's own one-pass residual knows no bias)
+    measurement_residual = Sensor.measurement_residual
+
     def _pad(self, H: np.ndarray) -> np.ndarray:
         out = super()._pad(H)
         out[:, self._components, self._columns] = 1.0

@@ -191,5 +191,9 @@ class Padded(Sensor):
     def residual(self, y, h):
         return self.sensor.residual(y, h)
 
+    def measurement_residual(self, y, x, t=0.0, reverse=False):
+        """The sensor's own (its one-pass kernel where it has one, as an unpadded filter's update uses)."""
+        return self.sensor.measurement_residual(y, x[:, :self._n], t, reverse)
+
     def measurement_mean(self, y, weights):
         return self.sensor.measurement_mean(y, weights)
