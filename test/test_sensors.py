@@ -16,6 +16,7 @@ from gpf_nav.filters import (BootstrapPF, EnsembleKF, ExtendedKF, GeometricProje
 from gpf_nav.models import LinearGaussianModel, LunarDescentModel
 from gpf_nav.models.lunar import MOON_RADIUS
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
+from gpf_nav.sensors.sensor import Padded
 from gpf_nav.sensors import (AltitudeSensor, ModelSensor, PositionSensor, VelocitySensor, gauss_markov_bias,
                              random_constant_bias)
 
@@ -134,6 +135,24 @@ def test_the_models_own_sensor_is_the_default_bit_for_bit(name):
             trace.append(np.concatenate([np.ravel(flt.mean), np.ravel(flt.covariance)]))
         runs.append(np.array(trace))
     assert np.array_equal(runs[0], runs[1])
+
+
+def test_a_padded_sensor_takes_the_wrapped_sensors_own_residual_of_the_users_state():
+    """A compensated filter's update with a user's sensor computes what the sensor computes for the user's
+    state (its one-pass residual, not the model's measurement and residual in turn)."""
+    model = LunarDescentModel(station=(1.7e6, 1e3, 2e3))
+    calls = []
+
+    class Counted(ModelSensor):
+        def measurement_residual(self, y, x, t=0.0, reverse=False):
+            calls.append(x.shape)
+            return super().measurement_residual(y, x, t, reverse)
+
+    x = np.random.default_rng(3).standard_normal((50, 9)) * 1e3 + [1.8e6, 0, 0, 0, 1.6e3, 0, 0, 0, 0]
+    y = np.array([1.0e5, 0.1, 0.2])
+    got = Padded(Counted(model, "rae"), 6, 9).measurement_residual(y, x, 0.0, True)
+    assert calls == [(50, 6)]
+    np.testing.assert_array_equal(got, model.measurement_residual(y, np.ascontiguousarray(x[:, :6]), 0.0, True))
 
 
 def test_altitude_jacobian_and_sensor_checks():
