@@ -16,9 +16,9 @@ from gpf_nav.filters import (BootstrapPF, EnsembleKF, ExtendedKF, GeometricProje
 from gpf_nav.models import LinearGaussianModel, LunarDescentModel
 from gpf_nav.models.lunar import MOON_RADIUS
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
-from gpf_nav.sensors.sensor import Padded
 from gpf_nav.sensors import (AltitudeSensor, ModelSensor, PositionSensor, VelocitySensor, gauss_markov_bias,
                              random_constant_bias)
+from gpf_nav.sensors.sensor import Padded
 
 FILTER_NAMES = short_names()  # every filter of the experiments, by its short name
 ORACLES = ("ekf-oracle", "ukf-oracle")
