@@ -91,6 +91,7 @@ class EstimatorNode(LifecycleNode):
         self._entities: list = []               # (destroy, entity): subscriptions, timers, service of configure
         self._publishers_by_topic: dict = {}
         self._tf_publisher = None
+        self._imu_subscription = None           # drained before each other input (_take_waiting_imu)
         self._configure_error = ""
         self._autostarting = self.params["autostart"]
         self._started = time.monotonic()
@@ -184,12 +185,14 @@ class EstimatorNode(LifecycleNode):
         qos = {"set_pose": reliable, "set_state": handover}
         # the IMU first: the executor takes the subscriptions that are ready in the order they were made, so
         # a sample and the measurement it precedes, ready together, are handled in stamp order (the other way
-        # round, the measurement's history is re-applied when the sample comes: engine, late IMU samples)
+        # round, the measurement's history is re-applied when the sample comes: engine, late IMU samples);
+        # the samples after the first wait for the next round, so every other input drains them first
         inputs = sorted(self.core.inputs.items(), key=lambda item: item[1][0] != "imu")
-        self._entities = [(self.destroy_subscription,
-                           self.create_subscription(msg_type, topic, self._callback(stream),
-                                                    qos.get(stream, sensor_qos)))
-                          for topic, (stream, msg_type) in inputs]
+        subscriptions = {stream: self.create_subscription(msg_type, topic, self._callback(stream),
+                                                          qos.get(stream, sensor_qos))
+                         for topic, (stream, msg_type) in inputs}
+        self._imu_subscription = subscriptions.get("imu")
+        self._entities = [(self.destroy_subscription, subscription) for subscription in subscriptions.values()]
         self._entities.append((self.destroy_service, self.create_service(Trigger, "~/reset", self._on_reset)))
         if p["publish_rate"] > 0:
             self._entities.append((self.destroy_timer,
@@ -214,6 +217,7 @@ class EstimatorNode(LifecycleNode):
             if publisher is not None:
                 self.destroy_lifecycle_publisher(publisher)
         self._entities, self._publishers_by_topic, self._tf_publisher = [], {}, None
+        self._imu_subscription = None
         self.core = self.engine = None
         thaw()
 
@@ -243,12 +247,30 @@ class EstimatorNode(LifecycleNode):
     def _callback(self, stream: str):
         def on_message(msg) -> None:
             if self.active:
+                if stream != "imu":
+                    self._take_waiting_imu()
                 self.core.handle(stream, msg, self._now_ns())
             elif stream in INITIALISING:
                 self._keep(stream, msg)
             else:
                 self.ignored[stream] += 1
         return on_message
+
+    def _take_waiting_imu(self) -> None:
+        """Handle the IMU samples already received, before another input: the executor takes one message
+        per subscription per round, so of a burst of samples and the measurement they precede only the first
+        sample would come before it, and each later one would make the engine re-apply the measurement. At
+        most ``queue_depth`` samples (the subscription's queue), so that a flood of IMU cannot hold up the
+        input waiting for them."""
+        subscription = self._imu_subscription
+        if subscription is None:
+            return
+        for _ in range(self.params["queue_depth"]):
+            with subscription.handle:  # the executor's own way to take a message (rclpy.executors)
+                taken = subscription.handle.take_message(subscription.msg_type, subscription.raw)
+            if taken is None:
+                return
+            self.core.handle("imu", taken[0], self._now_ns())
 
     def _keep(self, kind: str, msg) -> None:
         """Keep ``kind`` (a stream of INITIALISING or ``reset``) until activation; it replaces (and
