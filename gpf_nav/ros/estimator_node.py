@@ -188,11 +188,11 @@ class EstimatorNode(LifecycleNode):
         # round, the measurement's history is re-applied when the sample comes: engine, late IMU samples);
         # the samples after the first wait for the next round, so every other input drains them first
         inputs = sorted(self.core.inputs.items(), key=lambda item: item[1][0] != "imu")
-        subscriptions = {stream: self.create_subscription(msg_type, topic, self._callback(stream),
-                                                          qos.get(stream, sensor_qos))
-                         for topic, (stream, msg_type) in inputs}
-        self._imu_subscription = subscriptions.get("imu")
-        self._entities = [(self.destroy_subscription, subscription) for subscription in subscriptions.values()]
+        subscriptions = [(stream, self.create_subscription(msg_type, topic, self._callback(stream),
+                                                           qos.get(stream, sensor_qos)))
+                         for topic, (stream, msg_type) in inputs]
+        self._imu_subscription = next((sub for stream, sub in subscriptions if stream == "imu"), None)
+        self._entities = [(self.destroy_subscription, sub) for _, sub in subscriptions]
         self._entities.append((self.destroy_service, self.create_service(Trigger, "~/reset", self._on_reset)))
         if p["publish_rate"] > 0:
             self._entities.append((self.destroy_timer,
