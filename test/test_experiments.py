@@ -143,6 +143,11 @@ def test_sweep_smoke(tmp_path):
             for key in ("position_rmse_km", "velocity_rmse_mps", "nees"):
                 rows = report["cases"][case]["filters"][name][key]
                 assert len(rows) == 2 and all(_finite(r) for r in rows)
+            for point in report["cases"][case]["filters"][name]["position_rmse_km"]:  # two runs: the larger
+                worst, other = point["worst"]["value"], 2 * point["mean"] - point["worst"]["value"]
+                assert point["worst"]["run"] in (0, 1) and worst >= other
+                assert worst - other == pytest.approx(point["std"] * 2 ** 0.5)
+    assert "; worst " in (tmp_path / "sweep_mismatch.md").read_text()
     if pytest.importorskip("matplotlib"):
         assert (tmp_path / "sweep_mismatch.png").stat().st_size > 10_000
 

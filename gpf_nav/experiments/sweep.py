@@ -9,7 +9,7 @@
 Each point is ``--runs`` Monte Carlo runs (default 20) of every filter, both cases. Run ``r`` uses the
 same random numbers at every point (paired design), so the curves differ only by the swept parameter.
 Writes ``sweep_<param>.json`` (``values``, and ``cases -> case -> filters -> filter -> metric -> list of
-{mean, std, n}`` with one entry per value, plus failures) and ``sweep_<param>.png`` into ``--out``.
+{mean, std, n}`` with one entry per value, the position's with its worst run, plus failures) and ``sweep_<param>.png`` into ``--out``.
 The co-state / degeneracy figure comes from ``gpf-nav montecarlo`` (it needs the per-step series).
 
 ``--merge REPORT`` re-runs only ``--filters`` and puts their rows into an earlier report of the same
@@ -43,6 +43,8 @@ SCHEMA = "gpf_nav.sweep/2"
 COLUMNS = {"position_rmse_km": ("position_rmse", 1e-3), "velocity_rmse_mps": ("velocity_rmse", 1.0),
            "nees": ("nees", 1.0), "ess": ("ess", 1.0)}
 """Per-point statistics: JSON key -> (run summary key, scale)."""
+WORST_OF = "position_rmse_km"
+"""The statistic whose points also name their worst run."""
 PARAMETERS = {
     "mismatch": ("epsilon", (0.0, 0.02, 0.05, 0.09, 0.14, 0.2),
                  "gravity mismatch epsilon (truth mu(1+epsilon), filters mu)"),
@@ -81,12 +83,24 @@ def sweep(param: str, values, config, cases, runs: int, seed: int, filters, n_pa
                     if summary_key == "ess" and not registry.lookup(name).particles:
                         rows[key].append({"mean": None, "std": None, "n": 0})
                     else:
-                        rows[key].append(metrics.mean_std(per_run_values(chunk, name, summary_key, scale)))
+                        rows[key].append(_statistics(chunk, name, key))
                 entry["failures"][name].append({
                     "diverged": sum(bool(r["filters"][name]["diverged"]) for r in chunk),
                     "nonfinite": sum(bool(r["filters"][name]["nonfinite"]) for r in chunk)})
         report["cases"][case] = entry
     return report
+
+
+def _statistics(chunk: list[dict], name: str, key: str) -> dict:
+    """``{mean, std, n}`` of :data:`COLUMNS` ``key`` over the runs ``chunk`` (in run order) of filter ``name``; the
+    position's also ``worst``: ``{run, value}`` of the run with the largest RMSE (absent when no run is finite)."""
+    summary_key, scale = COLUMNS[key]
+    values = per_run_values(chunk, name, summary_key, scale)
+    point = metrics.mean_std(values)
+    if key == WORST_OF and point["n"]:
+        worst = int(np.nanargmax(values))
+        point["worst"] = {"run": chunk[worst]["run"], "value": float(values[worst])}
+    return point
 
 
 def settings(runs: int, seed: int, filters, n_particles: int, divergence_km: float, config) -> dict:
@@ -157,6 +171,8 @@ def markdown(report: dict) -> str:
                 cells = []
                 for r, f in zip(rows[key], entry["failures"][name]):
                     cell = "n/a" if r["mean"] is None else f"{r['mean']:.3g} ± {r['std']:.2g}"
+                    if "worst" in r:  # (rows of reports before the worst run was kept have none)
+                        cell += f"; worst {r['worst']['value']:.3g} (run {r['worst']['run']})"
                     if f["diverged"] or f["nonfinite"]:
                         cell += f" ({f['diverged']} div., {f['nonfinite']} NaN)"
                     cells.append(cell)
