@@ -113,7 +113,7 @@ ESTIMATOR = [
         Spec("imu_timeout", _ENGINE.imu_timeout, "An IMU sample older than this (relative to the measurement) is not used.", "s", "> 0"),
         Spec("max_extrapolation", _ENGINE.max_extrapolation, "Do not publish predictions more than this past the last measurement.", "s", "> 0"),
         Spec("max_measurement_rate", NODE_MAX_MEASUREMENT_RATE, "Process at most this many measurements per second (steady clock); 0: unlimited.", "Hz", ">= 0"),
-        Spec("queue_depth", 10, "Depth of the sensor-data (best-effort) subscription queues.", bounds=">= 1"),
+        Spec("queue_depth", 10, "Depth of the sensor-data (best-effort) subscription queues; also the most IMU samples taken before another input.", bounds=">= 1"),
         Spec("quaternion_tolerance", 0.01, "Allowed | |q| - 1 | of an IMU orientation.", bounds="> 0"),
     ),
     *_group(
