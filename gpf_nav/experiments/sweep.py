@@ -9,7 +9,8 @@
 Each point is ``--runs`` Monte Carlo runs (default 20) of every filter, both cases. Run ``r`` uses the
 same random numbers at every point (paired design), so the curves differ only by the swept parameter.
 Writes ``sweep_<param>.json`` (``values``, and ``cases -> case -> filters -> filter -> metric -> list of
-{mean, std, n}`` with one entry per value, the position's with its worst run, plus failures) and ``sweep_<param>.png`` into ``--out``.
+{mean, std, n}`` with one entry per value, the position's with its worst run, plus failures) and
+``sweep_<param>.png`` into ``--out``.
 The co-state / degeneracy figure comes from ``gpf-nav montecarlo`` (it needs the per-step series).
 
 ``--merge REPORT`` re-runs only ``--filters`` and puts their rows into an earlier report of the same
