@@ -22,7 +22,8 @@ from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD
 from gpf_nav.filters.gating import OUTLIER_GATE, OUTLIER_GATE_LIMIT
 from gpf_nav.filters.gpf import OBSERVABILITY_CONSTRAINT
 from gpf_nav.filters.interface import N_PARTICLES
-from gpf_nav.filters.multiple_model import COMPENSATION_SCALES, COMPENSATION_TIMES, NESTING_GATE, SWITCH_TIME
+from gpf_nav.filters.multiple_model import (COMPENSATION_SCALES, COMPENSATION_TIMES, NARROW_FILTER, NESTING_GATE,
+                                            SWITCH_TIME)
 from gpf_nav.models.state_space import StateSpaceModel
 
 KINDS = ("gpf", "particle", "ensemble", "kalman")
@@ -50,7 +51,7 @@ defaults: the update in the coordinates where the measurement, now and along the
 (:mod:`gpf_nav.filters.flattening`)."""
 
 
-MEMBER_OPTIONS = frozenset({"switch_time", "compensation_scales", "compensation_times", "nesting_gate"})
+MEMBER_OPTIONS = frozenset({"switch_time", "compensation_scales", "compensation_times", "nesting_gate", "narrow_filter"})
 """Options of the multiple-model GPF's members (:class:`MultipleModelGPF`)."""
 ONE_MEMBER = MappingProxyType({"compensation_scales": (1.0,), "compensation_times": (1.0,), "nesting_gate": 0.0})
 """Member options of ``gpf-pair``: the nominal member and one compensated member sized for the paper's
@@ -101,14 +102,14 @@ class FilterEntry:
 
 
 def _gpf(model, n_particles, seed, switch_time=SWITCH_TIME, compensation_scales=COMPENSATION_SCALES,
-         compensation_times=COMPENSATION_TIMES, nesting_gate=NESTING_GATE, **options):
+         compensation_times=COMPENSATION_TIMES, nesting_gate=NESTING_GATE, narrow_filter=NARROW_FILTER, **options):
     """The multiple model of the nominal and the compensated GPFs, or the nominal GPF alone when the
     compensation is switched off (``unmodelled_acceleration_std`` 0)."""
     if options.get("unmodelled_acceleration_std", UNMODELLED_ACCELERATION_STD) == 0.0:
         return GeometricProjectionPF(model, n_particles, seed=seed, **options)
     return MultipleModelGPF(model, n_particles, switch_time=switch_time, seed=seed,
                             compensation_scales=compensation_scales, compensation_times=compensation_times,
-                            nesting_gate=nesting_gate, **options)
+                            nesting_gate=nesting_gate, narrow_filter=narrow_filter, **options)
 
 
 def _gpf_variant(**fixed) -> Callable[..., Filter]:
@@ -161,9 +162,9 @@ for _entry in (
                     model, n_particles, seed, **{**NAVIGATION_GPF, **options}),
                 "gpf", GPF_OPTIONS | MEMBER_OPTIONS, "navigation", node=True, aliases=("gpf-mm", "gpf-ladder"),
                 description="the multiple-model GPF: navigation-grade GPFs (cloud metric, exact weights, "
-                            "tempering, the update flattened along the flow) on the nominal model and on "
-                            "compensated models of 1e-3, 1e-2 and 0.1 m/s^2, with the nesting gate; the "
-                            "node's default"),
+                            "tempering, the update flattened along the flow) on the nominal model and on a "
+                            "compensated model of 0.1 m/s^2, compensated EKFs of 1e-3, 1e-2 and 0.03 m/s^2, "
+                            "with the nesting gate; the node's default"),
     FilterEntry("gpf-pair", "GPF navigation, one compensated member",
                 lambda model, n_particles, seed, **options: _gpf(
                     model, n_particles, seed, **{**NAVIGATION_GPF, **options, **ONE_MEMBER}),

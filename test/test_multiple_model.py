@@ -170,7 +170,7 @@ def test_a_member_the_widest_one_does_not_admit_loses_its_probability_while_a_di
         sd = np.sqrt(np.diag(f.compensated.covariance))
         shift = np.zeros(6)
         shift[axis] = 10.0 * sd[axis]
-        narrow.set_moments(narrow.augmented_mean + shift, narrow.augmented_covariance)
+        narrow.initialize(narrow.augmented_mean + shift, narrow.augmented_covariance, narrow.time)
         before = f.model_probabilities[1]
         f.predict(1.0)
         f.update(ys[-1] + shift[:2])  # data that agree with the pushed member where they see
@@ -197,7 +197,7 @@ def test_a_member_that_refuses_a_component_takes_the_lowest_evidence_and_the_oth
 
     def scripted(member, evidence, refuses):
         def update(y, sensor=None):
-            member.log_likelihood = evidence
+            member.log_likelihood = member.last_log_likelihood = evidence  # (a GPF's, an EKF's)
             member.gated += refuses
         return update
 
@@ -213,3 +213,68 @@ def test_a_member_that_refuses_a_component_takes_the_lowest_evidence_and_the_oth
     np.testing.assert_allclose(mu, expected / expected.sum(), rtol=1e-12)
     prior, mu = weigh((0.0, 50.0, -3.0), (1, 1, 1))  # every member refused: the probabilities stay
     np.testing.assert_allclose(mu, prior, rtol=1e-12)
+
+
+def test_the_narrow_members_are_gated_compensated_ekfs_unless_asked_for_gpfs():
+    """By default the compensated members narrower than the widest are EKFs with the GPF members' gate;
+    the nominal and the widest member are GPFs; ``narrow_filter="gpf"`` makes every member a GPF."""
+    from gpf_nav.filters import CompensatedEKF
+    from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD as SIGMA_DEFAULT
+    f = MultipleModelGPF(constant_velocity(), 100, seed=0, compensation_scales=(0.01, 0.1, 1.0),
+                         compensation_times=(1.0, 1.0, 1.0), outlier_gate=4.0, outlier_gate_limit=3)
+    assert [type(m) for m in f.members] == [GeometricProjectionPF, CompensatedEKF, CompensatedEKF,
+                                            GeometricProjectionPF]
+    assert [(m.outlier_gate, m.outlier_gate_limit) for m in f.scaled[:-1]] == [(4.0, 3)] * 2
+    assert [m.model.acceleration_std for m in f.scaled] == pytest.approx([0.01 * SIGMA_DEFAULT, 0.1 * SIGMA_DEFAULT,
+                                                                          SIGMA_DEFAULT])
+    gpfs = MultipleModelGPF(constant_velocity(), 100, seed=0, narrow_filter="gpf")
+    assert all(type(m) is GeometricProjectionPF for m in gpfs.members)
+    with pytest.raises(ValueError, match="narrow_filter"):
+        MultipleModelGPF(constant_velocity(), narrow_filter="ukf")
+
+
+def test_the_point_set_of_the_mixture_has_its_mean_and_each_ekf_member_its_moments():
+    """``particles`` and ``weights`` are a weighted point set of the mixture: the GPF members' particles
+    and each EKF member's 2n sigma points, whose equal weights give that member's mean and covariance
+    exactly; together, the mixture's mean."""
+    from gpf_nav.filters.multiple_model import _sigma_points
+    ys = simulate(augmented_linear(constant_velocity()), np.array([0.0, 1.0, 0.3 * SIGMA]), 30, 1.0, seed=4)
+    f = run(ys, scales=(0.01, 0.1, 1.0), times=(1.0, 1.0, 1.0))
+    points, weights = f.particles, f.weights
+    assert points.shape == (2 * 1000 + 2 * 2 * 2, 2) and weights.sum() == pytest.approx(1.0)
+    np.testing.assert_allclose(weights @ points, f.mean, rtol=1e-9, atol=1e-12)
+    for member in f.scaled[:-1]:
+        sigma = _sigma_points(member)
+        np.testing.assert_allclose(sigma.mean(axis=0), member.mean, atol=1e-12)
+        np.testing.assert_allclose(np.cov(sigma.T, bias=True), member.covariance, rtol=1e-10)
+    assert 0.0 < f.ess <= 1.0
+
+
+def test_a_narrow_member_narrower_than_the_nominal_one_where_the_data_cannot_see_loses_its_probability():
+    """A compensated model contains the nominal one, so along a direction the data have not determined its
+    posterior is at least as wide as the nominal member's. With ``py`` never measured, a narrow member
+    whose ``(py, vy)`` variances are shrunk to 1 % is zeroed; left as it is, it keeps its probability;
+    with both positions measured every direction is determined and the evidence alone weighs it."""
+    truth = simulate(planar_constant_velocity(), np.array([0.0, 0.0, 1.0, 1.0]), 40, 1.0, seed=16)
+    partial = truth.copy()
+    partial[:, 1] = np.nan
+
+    def kept(ys, shrink):
+        f = MultipleModelGPF(planar_constant_velocity(), 500, seed=1, unmodelled_acceleration_std=SIGMA,
+                             unmodelled_acceleration_time=TAU, compensation_scales=(0.01, 1.0),
+                             compensation_times=(1.0, 1.0))
+        f.initialize(np.array([0.0, 0.0, 1.0, 1.0]), np.diag([4.0, 4.0, 1.0, 1.0]))
+        for y in ys[:-1]:
+            f.predict(1.0)
+            f.update(y)
+        narrow = f.scaled[0]
+        scale = np.ones(6)
+        scale[[1, 3]] = shrink
+        narrow.initialize(narrow.augmented_mean, narrow.augmented_covariance * np.outer(scale, scale), narrow.time)
+        f.predict(1.0)
+        f.update(ys[-1])
+        return f.model_probabilities[1]
+
+    assert kept(partial, 0.1) == 0.0
+    assert kept(partial, 1.0) > 0.05
+    assert kept(truth, 0.1) > 0.05

@@ -24,7 +24,8 @@ from gpf_nav.filters.gpf import METRICS, REFERENCES, WEIGHTINGS
 from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME
 from gpf_nav.filters.interface import N_PARTICLES
 from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
-from gpf_nav.filters.multiple_model import COMPENSATION_SCALES, COMPENSATION_TIMES, NESTING_GATE, SWITCH_TIME
+from gpf_nav.filters.multiple_model import (COMPENSATION_SCALES, COMPENSATION_TIMES, NARROW_FILTER, NARROW_FILTERS,
+                                            NESTING_GATE, SWITCH_TIME)
 from gpf_nav.models.gravity import FIELDS
 from gpf_nav.models.lunar import MU_MOON
 from gpf_nav.registry import FLATTENING_HORIZON
@@ -44,7 +45,7 @@ def _group(name: str, *specs: Spec) -> list[Spec]:
 ESTIMATOR = [
     *_group(
         FILTER_GROUP,
-        Spec("filter", "gpf", "gpf (geometric projection PF, multiple model: nominal or compensated at 1e-3, 1e-2 and 0.1 m/s^2), gpf-single (one compensated GPF), gpf-mm and gpf-ladder (= gpf), spf (bootstrap PF), ekf, ukf or enkf.", choices=FILTERS, checked_by=_BY_FILTER),
+        Spec("filter", "gpf", "gpf (geometric projection PF, multiple model: nominal or compensated at 1e-3, 1e-2, 0.03 and 0.1 m/s^2), gpf-single (one compensated GPF), gpf-mm and gpf-ladder (= gpf), spf (bootstrap PF), ekf, ukf or enkf.", choices=FILTERS, checked_by=_BY_FILTER),
         Spec("n_particles", N_PARTICLES, "Number of particles / ensemble members (gpf, spf, enkf); >= 2 for enkf.", bounds=">= 1", symbol="N", checked_by=_BY_FILTER),
         Spec("seed", 0, "Seed of the filter's random stream; negative: a random seed."),
         Spec("reference", "innovation", "GPF projection reference; increment needs metric euclidean or process_noise.", choices=REFERENCES, checked_by=_BY_FILTER),
@@ -57,6 +58,7 @@ ESTIMATOR = [
         Spec("compensation_scales", list(COMPENSATION_SCALES), "gpf: the compensated members' acceleration stds as fractions of unmodelled_acceleration_std, increasing to 1: one member per scale beside the nominal one, so that a force from far below to the size of unmodelled_acceleration_std has a member of its size.", bounds="(0, 1]", checked_by=_BY_FILTER),
         Spec("compensation_times", list(COMPENSATION_TIMES), "gpf: the compensated members' correlation times as fractions of unmodelled_acceleration_time, one per compensation scale, the last 1: a member of short time follows a force that varies along the orbit.", bounds="> 0", checked_by=_BY_FILTER),
         Spec("nesting_gate", NESTING_GATE, "gpf: chi-square probability of the gate by which the widest compensated member must admit another member's estimate for it to keep its probability while the data leave a direction undetermined (a member that explains an error the data cannot see with a narrower model); 0: no gate.", bounds="[0, 1)", checked_by=_BY_FILTER),
+        Spec("narrow_filter", NARROW_FILTER, "gpf: the filter of the compensated members narrower than the widest: ekf (a compensated EKF with the GPF's innovation gate; the nominal and the widest member stay GPFs) or gpf.", choices=NARROW_FILTERS, checked_by=_BY_FILTER),
         Spec("model_switch_time", SWITCH_TIME, "gpf: mean sojourn time of the nominal / compensated model chain.", "s", "> 0", checked_by=_BY_FILTER),
         Spec("kernel_bandwidth", 0.0, "gpf, cloud metric: kernel bandwidth h; 0: the default, the Gaussian-optimal one for N and the state dimension, 1.6 times it while an update is tempered or gated (gpf-single: 1.6 times it always; at most 0.95).", bounds="[0, 1)", symbol="h", checked_by=_BY_FILTER),
         Spec("flattening_horizon", FLATTENING_HORIZON, "gpf: the update runs in coordinates where the measurement now and of the state flowed half this and this far ahead is linear, so the cloud keeps its spread along what the data cannot see; 0: the measurement now only.", "s", ">= 0", checked_by=_BY_FILTER),

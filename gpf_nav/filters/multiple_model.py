@@ -1,4 +1,4 @@
-"""Interacting multiple models: the GPF on the nominal model and on compensated models of several scales.
+"""Interacting multiple models: the GPF on the nominal model and compensated models of several scales.
 
 Model-error compensation (:mod:`gpf_nav.models.compensation`) makes a filter robust to an unmodelled
 acceleration, and costs accuracy when there is none: it estimates three extra states that a correct
@@ -6,13 +6,23 @@ model does not need. It also has a scale: its prior, the acceleration's stationa
 ``sigma``, says how large a force it expects. A force far below ``sigma`` is not worth the extra states
 by the evidence, so the nominal model wins and ignores it, overconfident (the Moon's J2, 4.6e-4 m/s^2,
 against a compensation sized for the paper's 9 % gravity mismatch, 0.13 m/s^2); a force far above it
-cannot be followed. :class:`MultipleModelGPF` tests the hypotheses instead of assuming one: GPFs run in
+cannot be followed. :class:`MultipleModelGPF` tests the hypotheses instead of assuming one: filters run in
 parallel, one on the user's model as it is (``nominal``) and one per compensation scale, with
 ``sigma_j = compensation_scales[j] * unmodelled_acceleration_std`` and correlation time
-``tau_j = compensation_times[j] * unmodelled_acceleration_time``: by default three members, 1e-3, 1e-2
-and 0.1 m/s^2 with 2e4, 1e4 and 1e6 s, so that a force from 1e-4 to 0.2 m/s^2, constant or turning
-along the orbit, has a member of its size and pace. A Markov chain switches
-between the ``K`` models with mean sojourn ``switch_time``, a switch going to each other model alike.
+``tau_j = compensation_times[j] * unmodelled_acceleration_time``: by default four members, 1e-3, 1e-2,
+0.03 and 0.1 m/s^2 with 2e4, 1e4, 9e4 and 1e6 s, so that a force from 1e-4 to 0.2 m/s^2, constant or
+turning along the orbit, has a member of its size and pace. A Markov chain switches between the ``K``
+models with mean sojourn ``switch_time``, a switch going to each other model alike.
+
+**Which filter each member is.** The nominal member and the widest compensated one are GPFs: between
+them they carry the estimate wherever the data leave the state far from linear (a large prior, range
+only, no azimuth), and the widest one's co-state is the filter's. The narrower compensated members
+(``narrow_filter``) are by default compensated EKFs (:class:`~gpf_nav.filters.compensated.CompensatedEKF`,
+with the GPF's innovation gate): a narrow member wins the evidence only for a force of its own small size,
+which the data can see, so its posterior is close to Gaussian and the EKF's costs a few per cent of a GPF
+member's; where the data leave a direction undetermined, the nesting gate (step 4) keeps a narrow member
+only inside the widest GPF's posterior. ``narrow_filter="gpf"`` makes them GPFs too.
+
 Each cycle is Blom's interacting multiple model (IMM):
 
 1. **Mixing**, at the first ``predict`` after an update: with ``mu`` the model probabilities and
@@ -26,7 +36,8 @@ Each cycle is Blom's interacting multiple model (IMM):
    probable, so a small, slowly observable force is never learnt.
 2. Each member predicts and updates on its own model.
 3. **Model probabilities** ``mu_j ∝ c_j p(y | j)``, ``p(y | j)`` the member's incremental evidence
-   (:attr:`ParticleFilter.log_likelihood`, exact for the GPF's corrected weights). A member that did
+   (:attr:`ParticleFilter.log_likelihood`, exact for the GPF's corrected weights; the EKF's Gaussian
+   ``log N(r; 0, S)``). A member that did
    not weigh the whole measurement (its gate refused a component, or it re-initialised) has no
    evidence comparable with the others': it takes the lowest of theirs, since it found the measurement
    no more probable than the least of the members that used it. Leaving every probability at ``c``
@@ -45,6 +56,12 @@ Each cycle is Blom's interacting multiple model (IMM):
    When the data determine every direction the evidence checks every member along all of them and the
    gate is off: there the widest member can be the wrong one (an early gross outlier absorbed in its
    acceleration), and a gate would let it refuse the better members.
+   The gate also checks the spread: a compensated member's model contains the nominal one, so along
+   each undetermined direction its posterior is at least as wide as the nominal member's. A narrow
+   member whose variance there is below :data:`NESTING_SPREAD` of the nominal member's has lost what the
+   data never determined (an EKF linearised across a cloud far wider than the measurement's curvature
+   allows, e.g. a 20 km prior with range only, collapses along the unseen rotations to a few per cent
+   of the prior's variance) and is zeroed too.
 
 The estimate is the mixture ``sum_j mu_j N(m_j, P_j)`` (mean and covariance of the user's state); the
 unmodelled acceleration is the mixture of the compensated members' and the nominal model's zero.
@@ -52,8 +69,8 @@ unmodelled acceleration is the mixture of the compensated members' and the nomin
 It is the default GPF (``make_filter("gpf")``, the node). What it buys and costs on the lunar descent is
 measured in ``docs/results.md``: the accuracy of the nominal filter when the model is right, the
 compensated filter's when it is not (a force of the size of its compensation), and the
-nominal filter's where the compensation cannot be observed (range only), at ``K`` times the cost of one
-GPF.
+nominal filter's where the compensation cannot be observed (range only), at the cost of two GPFs and
+an EKF per narrow member.
 """
 from __future__ import annotations
 
@@ -62,29 +79,33 @@ import math
 import numpy as np
 from scipy.stats import chi2
 
-from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME
+from gpf_nav.filters.compensated import (UNMODELLED_ACCELERATION_STD, UNMODELLED_ACCELERATION_TIME,
+                                         CompensatedEKF)
+from gpf_nav.filters.gating import OUTLIER_GATE, OUTLIER_GATE_LIMIT
 from gpf_nav.filters.gpf import GeometricProjectionPF
 from gpf_nav.filters.composite import Composite
 from gpf_nav.filters.interface import (CLOUD, COMPENSATION, COSTATE, GATE, MODEL_PROBABILITIES, RESAMPLING,
-                                       TEMPERING, N_PARTICLES)
+                                       TEMPERING, N_PARTICLES, Filter)
 from gpf_nav.filters.model_averaging import mixture_moments
 from gpf_nav.linalg import positive_definite
 from gpf_nav.models.state_space import StateSpaceModel
 
 SWITCH_TIME = 2.0e5
 """Default mean sojourn time of the model chain, s (switching probability 1e-5 per 2 s step)."""
-COMPENSATION_SCALES = (0.01, 0.1, 1.0)
+COMPENSATION_SCALES = (0.01, 0.1, 0.3, 1.0)
 """Default compensation scales: the compensated members' ``sigma`` as fractions of
-``unmodelled_acceleration_std`` (module docstring): with its default 0.1 m/s^2, members of 1e-3, 1e-2
-and 0.1 m/s^2, so that the Moon's J2 (4.6e-4 m/s^2), a thrust of a few mm/s^2 and the paper's 9 %
-mismatch (0.13 m/s^2) each have a member of their size."""
-COMPENSATION_TIMES = (0.02, 0.01, 1.0)
+``unmodelled_acceleration_std`` (module docstring): with its default 0.1 m/s^2, members of 1e-3, 1e-2,
+0.03 and 0.1 m/s^2, so that the Moon's J2 (4.6e-4 m/s^2), a thrust of a few mm/s^2, a 2 % gravity
+mismatch (0.03 m/s^2) and the paper's 9 % (0.13 m/s^2) each have a member of their size. Without the
+0.03 m/s^2 member the 1e-2 member wins the evidence against a 0.03 m/s^2 force, three of its standard
+deviations, and its shrunk acceleration becomes an along-track error where azimuth is missing."""
+COMPENSATION_TIMES = (0.02, 0.01, 0.09, 1.0)
 """Default correlation times of the compensated members as fractions of ``unmodelled_acceleration_time``
-(with its default 1e6 s: 2e4, 1e4 and 1e6 s). A force of size ``sigma`` changes by about
+(with its default 1e6 s: 2e4, 1e4, 9e4 and 1e6 s). A force of size ``sigma`` changes by about
 ``sigma sqrt(2 T / tau)`` over a time ``T``: the smallest member follows J2 as it varies along the
-orbit, the middle one a thrust that turns, the widest one learns a constant mismatch and keeps it. No
+orbit, the 1e-2 one a thrust that turns, the widest one learns a constant mismatch and keeps it. No
 member's acceleration may change faster than the widest member's, ``2 sigma^2 / tau`` (the intensity of
-its driving noise: 1e-10, 2e-8 and 2e-8 m^2/s^5), so that the widest model contains every other in pace
+its driving noise: 1e-10, 2e-8, 2e-8 and 2e-8 m^2/s^5), so that the widest model contains every other in pace
 as well as in size (step 4). A faster member (1e-2 m/s^2 at 2e3 s, five times the widest's pace) is
 wider than the widest along a direction no measurement sees: without azimuth its state wanders there,
 its estimate stays inside the widest member's gate, and it wins the evidence by predicting the next
@@ -94,6 +115,14 @@ NESTING_GATE = 0.999
 member's estimate for that member to keep its probability, while the data leave a direction undetermined
 (0: no gate). Without it, where the data cannot see a direction (no azimuth) a small, fast
 member explains the error left there with a wrong state and wins the evidence."""
+NESTING_SPREAD = 0.5
+"""Fraction of the nominal member's variance along each undetermined direction below which a narrow
+compensated member is refused by the nesting gate (step 4 of the module docstring). The bound of exact
+arithmetic is 1; the half leaves room for the Monte Carlo error of a cloud's variance."""
+NARROW_FILTERS = ("ekf", "gpf")
+"""Filters the compensated members narrower than the widest can be (module docstring)."""
+NARROW_FILTER = "ekf"
+"""Default ``narrow_filter``: compensated EKFs (module docstring, *Which filter each member is*)."""
 
 
 class MultipleModelGPF(Composite):
@@ -101,8 +130,8 @@ class MultipleModelGPF(Composite):
 
     A :class:`~gpf_nav.filters.composite.Composite` whose principal member is :attr:`compensated`: the
     co-state is that member's (:meth:`delegate`); the estimate, the particle diagnostics and the
-    unmodelled acceleration are model averages over the members, the gate's and tempering's counts
-    their sums.
+    unmodelled acceleration are model averages over the members, the gate's count their sum, the
+    resampling and tempering counts those of the GPF members.
 
     Args:
         model: the user's state-space model.
@@ -115,14 +144,19 @@ class MultipleModelGPF(Composite):
             positive, the last 1, one per scale (default :data:`COMPENSATION_TIMES`).
         nesting_gate: probability of the nesting gate in [0, 1) (step 4; 0: none; default
             :data:`NESTING_GATE`).
+        narrow_filter: the filter of the compensated members narrower than the widest, one of
+            :data:`NARROW_FILTERS` (default :data:`NARROW_FILTER`): ``ekf`` a
+            :class:`~gpf_nav.filters.compensated.CompensatedEKF` with the GPF members' ``outlier_gate`` and
+            ``outlier_gate_limit``, ``gpf`` a :class:`GeometricProjectionPF` like the others.
         seed: seed of the members' random streams (spawned from it).
         **options: further options of every member (:class:`GeometricProjectionPF`); the compensation
             options (``unmodelled_acceleration_std`` > 0, ``unmodelled_acceleration_time``) apply to the
             compensated ones.
 
     Attributes:
-        nominal: the member on the user's model.
-        scaled: the compensated members, by increasing ``sigma``.
+        nominal: the member on the user's model (a GPF).
+        scaled: the compensated members, by increasing ``sigma`` (the widest a GPF, the others
+            ``narrow_filter``'s).
         compensated: the widest of them (``sigma = unmodelled_acceleration_std``): its model contains
             every other member's, so its co-state measures what none of them explains.
         model_probabilities: ``(K,)`` probabilities of the nominal model, then of :attr:`scaled`'s.
@@ -132,7 +166,7 @@ class MultipleModelGPF(Composite):
                  seed: int | np.random.Generator | None = None,
                  compensation_scales: tuple[float, ...] = COMPENSATION_SCALES,
                  compensation_times: tuple[float, ...] = COMPENSATION_TIMES,
-                 nesting_gate: float = NESTING_GATE, **options):
+                 nesting_gate: float = NESTING_GATE, narrow_filter: str = NARROW_FILTER, **options):
         if not (math.isfinite(switch_time) and switch_time > 0):
             raise ValueError(f"switch_time must be positive, got {switch_time}")
         scales = tuple(float(s) for s in compensation_scales)
@@ -143,6 +177,8 @@ class MultipleModelGPF(Composite):
             raise ValueError(f"compensation_times must be positive, one per scale, the last 1; got {compensation_times}")
         if not 0.0 <= nesting_gate < 1.0:
             raise ValueError(f"nesting_gate must lie in [0, 1), got {nesting_gate}")
+        if narrow_filter not in NARROW_FILTERS:
+            raise ValueError(f"narrow_filter must be one of {NARROW_FILTERS}, got {narrow_filter!r}")
         super().__init__(model)
         sigma = options.pop("unmodelled_acceleration_std", UNMODELLED_ACCELERATION_STD)
         tau = options.pop("unmodelled_acceleration_time", UNMODELLED_ACCELERATION_TIME)
@@ -156,12 +192,21 @@ class MultipleModelGPF(Composite):
         self.nominal = GeometricProjectionPF(model, n_particles, unmodelled_acceleration_std=0.0,
                                              seed=np.random.default_rng(streams[0]), **nominal_options)
         stream_of = [*range(2, len(scales) + 1), 1]  # the widest member's is the second stream
-        self.scaled = tuple(
-            GeometricProjectionPF(model, n_particles, seed=np.random.default_rng(streams[stream]), nominal_prior=0.0,
-                                  unmodelled_acceleration_std=scale * sigma, unmodelled_acceleration_time=time * tau,
-                                  **options)
-            for stream, scale, time in zip(stream_of, scales, times))
+        gate = {key: options.get(key, default) for key, default in
+                (("outlier_gate", OUTLIER_GATE), ("outlier_gate_limit", OUTLIER_GATE_LIMIT))}
+
+        def member(stream: int, scale: float, time: float, narrow: bool) -> Filter:
+            rng = np.random.default_rng(streams[stream])
+            if narrow and narrow_filter == "ekf":
+                return CompensatedEKF(model, scale * sigma, time * tau, nominal_prior=0.0, seed=rng, **gate)
+            return GeometricProjectionPF(model, n_particles, seed=rng, nominal_prior=0.0,
+                                         unmodelled_acceleration_std=scale * sigma,
+                                         unmodelled_acceleration_time=time * tau, **options)
+
+        self.scaled = tuple(member(stream, scale, time, narrow=stream != 1)
+                            for stream, scale, time in zip(stream_of, scales, times))
         self.compensated = self.scaled[-1]
+        self.narrow_filter = narrow_filter
         self.nesting_gate = float(nesting_gate)
         self._nesting_limit = float(chi2.ppf(nesting_gate, model.state_dim)) if nesting_gate else math.inf
         self.compensation_scales, self.compensation_times = scales, times
@@ -174,10 +219,15 @@ class MultipleModelGPF(Composite):
     own_capabilities = frozenset({CLOUD, RESAMPLING, GATE, TEMPERING, MODEL_PROBABILITIES, COMPENSATION})
 
     @property
-    def members(self) -> tuple[GeometricProjectionPF, ...]:
+    def members(self) -> tuple[Filter, ...]:
         """The nominal member, then the compensated ones by increasing scale (the principal,
         :attr:`compensated`, last)."""
         return (self.nominal, *self.scaled)
+
+    def _particle_members(self) -> list[tuple[float, GeometricProjectionPF]]:
+        """``(model probability, member)`` of the GPF members."""
+        return [(mu, m) for mu, m in zip(self.model_probabilities, self.members)
+                if isinstance(m, GeometricProjectionPF)]
 
     def delegate(self, capability: str) -> GeometricProjectionPF | None:
         """:attr:`compensated` answers the co-state: the co-state of the model that contains the others
@@ -211,7 +261,7 @@ class MultipleModelGPF(Composite):
         refused = np.array([(m.gated, m.recoveries) != b for m, b in zip(self.members, before)])
         mu = self._predicted_probabilities
         if not refused.all():
-            evidence = np.array([m.log_likelihood for m in self.members])
+            evidence = np.array([_evidence(m) for m in self.members])
             evidence[refused] = evidence[~refused].min()  # (step 3 of the module docstring)
             posterior = mu * np.exp(evidence - evidence.max())
             if np.isfinite(posterior).all() and posterior.sum() > 0.0:  # else the data cannot tell them apart
@@ -225,14 +275,21 @@ class MultipleModelGPF(Composite):
 
     def _nested(self) -> np.ndarray:
         """``(K,)`` bool: the members whose estimate of the user's state the widest member's posterior
-        admits (step 4 of the module docstring); the widest always, and every member when the data have
-        determined every direction."""
+        admits and, for the narrow ones, whose spread along the undetermined directions the nominal
+        member's does not exceed by more than ``1 / NESTING_SPREAD`` (step 4 of the module docstring); the
+        widest always, and every member when the data have determined every direction."""
         report = self.observability
         if report is not None and report.determined:
             return np.ones(len(self.members), dtype=bool)
         mean, cov = self.compensated.mean, self.compensated.covariance
         distances = [float(d @ np.linalg.solve(cov, d)) for d in (m.mean - mean for m in self.members[:-1])]
-        return np.append(np.array(distances) <= self._nesting_limit, True)
+        admitted = np.append(np.array(distances) <= self._nesting_limit, True)
+        if report is not None:
+            directions = report.directions.T  # (n, d)
+            floor = NESTING_SPREAD * _variances(self.nominal.covariance, directions)
+            for j, member in enumerate(self.scaled[:-1], 1):
+                admitted[j] &= bool(np.all(_variances(member.covariance, directions) >= floor))
+        return admitted
 
     def _mix(self, p: float) -> None:
         """IMM mixing with switching probability ``p`` (module docstring, step 1)."""
@@ -299,37 +356,69 @@ class MultipleModelGPF(Composite):
     # --- particle diagnostics, model-averaged ----------------------------------------------------------
     @property
     def particles(self) -> np.ndarray:
-        """Every member's particles ``(K N, n)`` in the user's state: with :attr:`weights`, a weighted
-        sample of the mixture."""
+        """A weighted point set ``(M, n)`` of the mixture in the user's state: every GPF member's particles,
+        and each EKF member's ``2 n`` points ``m +- sqrt(n) L e_j`` (``L L^T = P``: the member's mean and
+        covariance exactly)."""
         n = self.model.state_dim
-        return np.vstack([self.nominal.particles] + [m.particles[:, :n] for m in self.scaled])
+        return np.vstack([m.particles[:, :n] if isinstance(m, GeometricProjectionPF) else _sigma_points(m)
+                          for m in self.members])
 
     @property
     def weights(self) -> np.ndarray:
-        """Weights ``(K N,)`` of :attr:`particles`: each member's, times its model probability."""
-        return np.concatenate([mu * m.weights for mu, m in zip(self.model_probabilities, self.members)])
+        """Weights ``(M,)`` of :attr:`particles`: each member's (``1 / 2n`` for an EKF's points), times its
+        model probability."""
+        n = self.model.state_dim
+        return np.concatenate([mu * m.weights if isinstance(m, GeometricProjectionPF) else np.full(2 * n, mu / (2 * n))
+                               for mu, m in zip(self.model_probabilities, self.members)])
 
     @property
     def ess(self) -> float:
-        """Probability-weighted ESS/N of the members' last updates."""
-        return float(sum(mu * m.ess for mu, m in zip(self.model_probabilities, self.members)))
+        """ESS/N of the GPF members' last updates, weighted by their model probabilities (an EKF member
+        has no particles to degenerate)."""
+        members = self._particle_members()
+        total = sum(mu for mu, _ in members)
+        if not total > 0.0:
+            return float(np.mean([m.ess for _, m in members]))
+        return float(sum(mu * m.ess for mu, m in members) / total)
 
     @property
     def resampled(self) -> bool:
-        """Whether any member resampled at the last update."""
-        return any(m.resampled for m in self.members)
+        """Whether any GPF member resampled at the last update."""
+        return any(m.resampled for _, m in self._particle_members())
 
     @property
     def resample_count(self) -> int:
-        """Resamplings of every member."""
-        return sum(m.resample_count for m in self.members)
+        """Resamplings of every GPF member."""
+        return sum(m.resample_count for _, m in self._particle_members())
 
     @property
     def tempered_updates(self) -> int:
-        """Updates a member split into tempering stages, every member."""
-        return sum(m.tempered_updates for m in self.members)
+        """Updates a GPF member split into tempering stages."""
+        return sum(m.tempered_updates for _, m in self._particle_members())
 
     @property
     def gated(self) -> int:
         """Measurement components refused by the innovation gate, every member."""
         return sum(m.gated for m in self.members)
+
+
+def _variances(cov: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """``(d,)`` variances ``v^T P v`` of the covariance ``cov`` ``(n, n)`` along each column ``v`` of
+    ``directions`` ``(n, d)``."""
+    return np.einsum("id,ij,jd->d", directions, cov, directions)
+
+
+def _evidence(member: Filter) -> float:
+    """The member's log evidence of its last update: a particle filter's incremental evidence, a
+    Gaussian filter's ``log N(r; 0, S)``."""
+    if isinstance(member, GeometricProjectionPF):
+        return member.log_likelihood
+    return member.last_log_likelihood
+
+
+def _sigma_points(member: Filter) -> np.ndarray:
+    """``(2 n, n)`` points ``m +- sqrt(n) L e_j`` of a Gaussian member's estimate of the user's state
+    (``L L^T = P``): equally weighted, they have its mean and covariance."""
+    mean, cov = member.mean, member.covariance
+    spread = math.sqrt(mean.size) * np.linalg.cholesky(cov).T  # rows: the columns of sqrt(n) L
+    return np.vstack([mean + spread, mean - spread])
