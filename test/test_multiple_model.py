@@ -225,6 +225,12 @@ def test_the_narrow_members_are_gated_compensated_ekfs_unless_asked_for_gpfs():
     assert [type(m) for m in f.members] == [GeometricProjectionPF, CompensatedEKF, CompensatedEKF,
                                             GeometricProjectionPF]
     assert [(m.outlier_gate, m.outlier_gate_limit) for m in f.scaled[:-1]] == [(4.0, 3)] * 2
+    # the nominal member's report is the mixture's: the EKFs run no observability recursions
+    f.initialize(MEAN, COV)
+    f.predict(1.0)
+    f.update(np.array([0.5]))
+    assert [m.observability is None for m in f.members] == [False, True, True, False]
+    assert f.observability_trackers() == (f.nominal.observability_trackers() + f.compensated.observability_trackers())
     assert [m.model.acceleration_std for m in f.scaled] == pytest.approx([0.01 * SIGMA_DEFAULT, 0.1 * SIGMA_DEFAULT,
                                                                           SIGMA_DEFAULT])
     gpfs = MultipleModelGPF(constant_velocity(), 100, seed=0, narrow_filter="gpf")

@@ -181,21 +181,28 @@ class Filter(ABC):
     def observability(self) -> ObservabilityReport | None:
         """What the measurements have determined since the prior, and the directions they have not
         (:mod:`gpf_nav.integrity.observability`); None before :meth:`initialize`."""
-        return self._observability.report()
+        return None if self._observability is None else self._observability.report()
 
     def observability_trackers(self) -> tuple[ObservabilityTracker, ...]:
         """The observability trackers this filter runs: its own; a filter that runs others, theirs (the
         estimator's warm-up rehearses their reanchoring)."""
-        return (self._observability,)
+        return () if self._observability is None else (self._observability,)
+
+    def forgo_observability(self) -> None:
+        """Run no observability recursions (:attr:`observability` is then None): for a member of a composite
+        filter that reads no report of it. The recursions cost about as much as an EKF's own step."""
+        self._observability = None
 
     def _observe_predict(self, dt: float, u) -> None:
         """Carry the observability recursions over ``dt`` (call before :attr:`time` moves)."""
-        self._observability.predict(dt, self.time, u)
+        if self._observability is not None:
+            self._observability.predict(dt, self.time, u)
 
     def _observe_update(self, y: np.ndarray, sensor: Sensor, rows: np.ndarray, mean: np.ndarray) -> None:
         """Add the information of the measured ``rows`` ``(m,)`` of ``y`` from ``sensor``; ``mean`` ``(n,)``
         is the filter's own (where the tracker moves its reference if it has lost it)."""
-        self._observability.update(sensor, y, rows, self.time, mean)
+        if self._observability is not None:
+            self._observability.update(sensor, y, rows, self.time, mean)
 
     def _require_initialized(self) -> None:
         if not self.initialized:
@@ -264,7 +271,8 @@ class Filter(ABC):
             validate_model(self.model, mean, cov, t0)
             self._model_checked = True
         self.time = t0
-        self._observability.reset(mean, cov)
+        if self._observability is not None:
+            self._observability.reset(mean, cov)
         return mean, cov
 
     @property

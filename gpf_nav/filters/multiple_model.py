@@ -198,7 +198,9 @@ class MultipleModelGPF(Composite):
         def member(stream: int, scale: float, time: float, narrow: bool) -> Filter:
             rng = np.random.default_rng(streams[stream])
             if narrow and narrow_filter == "ekf":
-                return CompensatedEKF(model, scale * sigma, time * tau, nominal_prior=0.0, seed=rng, **gate)
+                ekf = CompensatedEKF(model, scale * sigma, time * tau, nominal_prior=0.0, seed=rng, **gate)
+                ekf.forgo_observability()  # (the nominal member's report is the mixture's)
+                return ekf
             return GeometricProjectionPF(model, n_particles, seed=rng, nominal_prior=0.0,
                                          unmodelled_acceleration_std=scale * sigma,
                                          unmodelled_acceleration_time=time * tau, **options)
