@@ -51,7 +51,8 @@ defaults: the update in the coordinates where the measurement, now and along the
 (:mod:`gpf_nav.filters.flattening`)."""
 
 
-MEMBER_OPTIONS = frozenset({"switch_time", "compensation_scales", "compensation_times", "nesting_gate", "narrow_filter"})
+MEMBER_OPTIONS = frozenset({"switch_time", "compensation_scales", "compensation_times", "nesting_gate",
+                            "narrow_filter"})
 """Options of the multiple-model GPF's members (:class:`MultipleModelGPF`)."""
 ONE_MEMBER = MappingProxyType({"compensation_scales": (1.0,), "compensation_times": (1.0,), "nesting_gate": 0.0})
 """Member options of ``gpf-pair``: the nominal member and one compensated member sized for the paper's

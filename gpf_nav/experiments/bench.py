@@ -2,9 +2,9 @@
 
 The filters are :mod:`gpf_nav.registry` entries, by name (default :data:`FILTERS`): ``gpf`` is the
 default (navigation-grade) configuration, the multiple-model GPF (a nominal and a compensated GPF of N
-particles each, and three compensated EKFs), ``gpf-paper`` the paper's, ``gpf-single`` one navigation-grade GPF of N particles on the
-compensated model, ``spf`` the bootstrap PF without its diagnostic co-state, and
-``particles`` N. Chopin's bootstrap filter on the same model when that library is installed
+particles each, and three compensated EKFs), ``gpf-paper`` the paper's, ``gpf-single`` one
+navigation-grade GPF of N particles on the compensated model, ``spf`` the bootstrap PF without its
+diagnostic co-state, and ``particles`` N. Chopin's bootstrap filter on the same model when that library is installed
 (:mod:`gpf_nav.experiments.peer_particles`; skipped otherwise).
 Each filter runs on the same seeded lunar-descent measurements, each step on the next measurement. A step
 is timed over a block of steps. The filters of one group (the particle filters of one N; the Gaussian

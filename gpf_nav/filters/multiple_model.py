@@ -9,7 +9,7 @@ against a compensation sized for the paper's 9 % gravity mismatch, 0.13 m/s^2); 
 cannot be followed. :class:`MultipleModelGPF` tests the hypotheses instead of assuming one: filters run in
 parallel, one on the user's model as it is (``nominal``) and one per compensation scale, with
 ``sigma_j = compensation_scales[j] * unmodelled_acceleration_std`` and correlation time
-``tau_j = compensation_times[j] * unmodelled_acceleration_time``: by default four members, 1e-3, 1e-2,
+``tau_j = compensation_times[j] * unmodelled_acceleration_time``: by default four compensated members, 1e-3, 1e-2,
 0.03 and 0.1 m/s^2 with 2e4, 1e4, 9e4 and 1e6 s, so that a force from 1e-4 to 0.2 m/s^2, constant or
 turning along the orbit, has a member of its size and pace. A Markov chain switches between the ``K``
 models with mean sojourn ``switch_time``, a switch going to each other model alike.
