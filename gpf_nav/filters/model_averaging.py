@@ -34,9 +34,12 @@ NEGLIGIBLE = 1e-12
 
 
 def mixture_moments(weights, moments: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
-    """Mean ``(d,)`` and covariance ``(d, d)`` of ``sum_i weights_i N(m_i, P_i)``."""
-    mean = sum(w * m for w, (m, _) in zip(weights, moments))
-    cov = sum(w * (P + np.outer(m - mean, m - mean)) for w, (m, P) in zip(weights, moments))
+    """Mean ``(d,)`` and covariance ``(d, d)`` of ``sum_i weights_i N(m_i, P_i)``. A component of weight 0 takes
+    no part, whatever its moments (a member of a multiple model that followed garbage to 1e154 has probability
+    0, and ``0 * inf`` would be NaN)."""
+    terms = [(w, m, P) for w, (m, P) in zip(weights, moments) if w != 0.0]
+    mean = sum(w * m for w, m, _ in terms)
+    cov = sum(w * (P + np.outer(m - mean, m - mean)) for w, m, P in terms)
     return mean, 0.5 * (cov + cov.T)
 
 
