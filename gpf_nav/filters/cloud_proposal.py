@@ -22,6 +22,7 @@ import numpy as np
 
 from gpf_nav.filters.flattening import Flattening, flattening
 from gpf_nav.filters.kernel import ProposalMixture, shrink
+from gpf_nav.filters.normal_draws import NormalDraws
 from gpf_nav.filters.proposal import Move, Proposal, Stage, prior_draw
 from gpf_nav.linalg import cholesky_or_none, triangular_inverse
 
@@ -101,7 +102,7 @@ class CloudProposal(Proposal):
         M.flat[::n + 1] += 1.0
         R = cholesky_or_none(M, symmetric=True)  # never None: M >= I, and the check of S bounds G G^T / eps
         U = triangular_inverse(R).T  # (n, n)
-        z = antithetic_normals(pf.rng, n, pf.n_particles)
+        z = antithetic_normals(pf.normal_draws, n, pf.n_particles)
         m = B.T @ white_r  # (n, N)
         w = U @ z
         w += m
@@ -204,14 +205,14 @@ class FlattenedProposal(CloudProposal):
         return H, r
 
 
-def antithetic_normals(rng: np.random.Generator, rows: int, count: int) -> np.ndarray:
+def antithetic_normals(draws: NormalDraws, rows: int, count: int) -> np.ndarray:
     """Standard normal draws ``(rows, count)`` in antithetic pairs: column ``i + ceil(count / 2)`` is minus
     column ``i``. Each column is still an exact standard normal draw (so each particle's draw is exactly
     from its own proposal and the exact weights stay exact); the pairs halve the draws, the costliest
     part of the cloud proposal at a few hundred particles, and make the unweighted mean of the noise
     zero (antithetic variates)."""
     half = (count + 1) // 2
-    z = rng.standard_normal((rows, half))
+    z = draws(rows, half)
     out = np.empty((rows, count))
     out[:, :half] = z
     np.negative(z[:, :count - half], out=out[:, half:])

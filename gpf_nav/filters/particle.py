@@ -31,6 +31,7 @@ from gpf_nav.filters.flattening import Flattening
 from gpf_nav.filters.interface import CLOUD, COSTATE, N_PARTICLES, RESAMPLING, TEMPERING, Filter
 from gpf_nav.filters.kernel import map_moments, weighted_moments
 from gpf_nav.filters.likelihood import Whitening, log_likelihood
+from gpf_nav.filters.normal_draws import NormalDraws
 from gpf_nav.filters.proposal import PriorProposal, Proposal, Stage
 from gpf_nav.filters.tempering_schedule import Tempering
 from gpf_nav.kernels import cloud, log_weights
@@ -98,6 +99,7 @@ class ParticleFilter(Filter):
         self.ess_threshold = float(ess_threshold)
         self.resampling = resampling
         self._resample = resamplers.get(resampling)
+        self.normal_draws = NormalDraws(self.rng)
         n = model.state_dim
         self._x = np.zeros((n, self.n_particles))
         self._logw = np.full(self.n_particles, -np.log(self.n_particles))
@@ -121,7 +123,7 @@ class ParticleFilter(Filter):
     # --- state ---------------------------------------------------------------------------------------
     def initialize(self, mean, cov, t0=0.0):
         mean, cov = self._check_prior(mean, cov, t0)
-        z = self.rng.standard_normal((mean.size, self.n_particles))
+        z = self.normal_draws(mean.size, self.n_particles)
         self._x = np.ascontiguousarray(mean[:, None] + psd_sqrt(cov) @ z)
         self._set_uniform_weights()
         self._pending_dt = 0.0
@@ -215,7 +217,7 @@ class ParticleFilter(Filter):
         if self._pending_dt > 0.0:
             factor = self._noise_factors(self._pending_dt)[0]
             # a new array, so views handed out as `particles` keep their state
-            self._x = self._x + factor @ self.rng.standard_normal(self._x.shape)
+            self._x = self._x + factor @ self.normal_draws(*self._x.shape)
         self._observe_predict(dt, u)
         self._x = np.ascontiguousarray(self.model.transition(self._x.T, dt, self.time, u).T)
         self._pending_dt, self._pending_t = dt, self.time

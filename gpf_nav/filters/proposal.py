@@ -111,7 +111,7 @@ def prior_draw(pf: ParticleFilter, x: np.ndarray, dt: float
     if not dt > 0.0:
         return x.copy(), None, None
     factor, inverse_factor = pf._noise_factors(dt)
-    z = pf.rng.standard_normal((pf.model.state_dim, pf.n_particles))
+    z = pf.normal_draws(pf.model.state_dim, pf.n_particles)
     moved = factor @ z
     moved += x
     return moved, z, inverse_factor

@@ -2,32 +2,44 @@
 their Jacobian.
 
 The residual is the measurement, its residual and the angles' wrapping
-(:func:`gpf_nav.models.state_space.wrapped_residual`) in one pass over the particles, without the
-``(N, 3)`` temporaries of the numpy code; ``math.atan2`` is the C library's, as ``np.arctan2`` is where
-numpy has no SIMD version of its own (x86-64 without AVX-512), so there the result is the numpy one bit for
-bit, elsewhere equal to rounding (``test_kernels`` checks which). The Jacobian is built from the line of sight
-(:func:`gpf_nav.kernels.orbit.line_of_sight`) with the numpy code's operations, one particle at a time: no
-transcendental function, so it too is the numpy one bit for bit. One pass writes every entry, the zero
-ones included, instead of zeroing the ``(3, 6, N)`` array first and filling it row by row.
+(:func:`gpf_nav.models.state_space.wrapped_residual`) without the numpy code's ``(N, 3)`` temporaries. Below
+:data:`~gpf_nav.kernels.VECTOR_ANGLES` particles it is one pass, ``math.atan2`` the C library's, as
+``np.arctan2`` is where numpy has no SIMD version of its own (x86-64 without AVX-512): there the result is
+the numpy one bit for bit, elsewhere equal to rounding. From it the arctangents are numpy's own over the
+whole cloud (its SIMD loops, several times faster than the C library's one at a time) between two
+passes, and the result is the numpy one bit for bit on every machine (``test_kernels`` checks both). The
+Jacobian is built from the line of sight (:func:`gpf_nav.kernels.orbit.line_of_sight`) with the numpy
+code's operations, one particle at a time: no transcendental function, so it too is the numpy one bit for
+bit. One pass writes every entry, the zero ones included, instead of zeroing the ``(3, 6, N)`` array first
+and filling it row by row.
 """
 from __future__ import annotations
 
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
-from gpf_nav.kernels import CHUNK, PARALLEL
+from gpf_nav.kernels import VECTOR_ANGLES
 from gpf_nav.kernels.angles import INVERSE_TWO_PI, TWO_PI
+from gpf_nav.kernels.orbit import line_of_sight
 
 
 @njit(cache=True, error_model="numpy")
-def _residual_block(r, station, y, reverse, out, start, stop) -> bool:
-    """The unwrapped residuals of the particles ``start`` to ``stop`` into ``out``; whether an angle among
-    them needs wrapping (NaN counts, as in :func:`~gpf_nav.kernels.angles.wrap_columns`)."""
+def _wrap_angles(out) -> None:
+    for c in range(1, 3):
+        row = out[c]
+        for j in range(row.size):
+            row[j] -= TWO_PI * np.ceil((row[j] - math.pi) * INVERSE_TWO_PI)
+
+
+@njit(cache=True, error_model="numpy")
+def _residual_scalar(r, station, y, reverse, out):
+    """The residuals in one pass over the particles, the angles wrapped after it when any needs it (NaN
+    counts, as in :func:`~gpf_nav.kernels.angles.wrap_columns`)."""
     s0, s1, s2 = station[0], station[1], station[2]
     wrap = False
-    for j in range(start, stop):
+    for j in range(out.shape[1]):
         d0, d1, d2 = r[0, j] - s0, r[1, j] - s1, r[2, j] - s2
         horizontal = d0 * d0 + d1 * d1
         h = (math.sqrt(horizontal + d2 * d2), math.atan2(d1, d0), math.atan2(d2, math.sqrt(horizontal)))
@@ -36,42 +48,41 @@ def _residual_block(r, station, y, reverse, out, start, stop) -> bool:
             out[c, j] = value
             if c > 0:
                 wrap |= np.ceil((value - math.pi) * INVERSE_TWO_PI) != 0.0
-    return wrap
+    if wrap:
+        _wrap_angles(out)
 
 
 @njit(cache=True, error_model="numpy")
-def _wrap_angles(out, start, stop) -> None:
-    for c in range(1, 3):
-        for j in range(start, stop):
-            out[c, j] -= TWO_PI * np.ceil((out[c, j] - math.pi) * INVERSE_TWO_PI)
-
-
-@njit(cache=True, error_model="numpy")
-def _residual_serial(r, station, y, reverse, out):
-    if _residual_block(r, station, y, reverse, out, 0, out.shape[1]):
-        _wrap_angles(out, 0, out.shape[1])
-
-
-@njit(cache=True, error_model="numpy", parallel=True)
-def _residual_parallel(r, station, y, reverse, out):
-    count = out.shape[1]
-    blocks = (count + CHUNK - 1) // CHUNK
-    wrap = np.zeros(blocks, dtype=np.bool_)
-    for block in prange(blocks):
-        wrap[block] = _residual_block(r, station, y, reverse, out, block * CHUNK, min(block * CHUNK + CHUNK, count))
-    if wrap.any():
-        for block in prange(blocks):
-            _wrap_angles(out, block * CHUNK, min(block * CHUNK + CHUNK, count))
+def _difference(h, y, reverse, out):
+    """``y - h`` (``reverse``: ``h - y``) of the measurements ``h`` ``(3, N)`` into ``out``, both angles
+    wrapped when either needs it anywhere; row by row, so the loops vectorise."""
+    wrap = False
+    for c in range(3):
+        measured, target, value = h[c], out[c], y[c]
+        for j in range(measured.size):
+            target[j] = measured[j] - value if reverse else value - measured[j]
+        if c > 0:
+            for j in range(target.size):
+                wrap |= np.ceil((target[j] - math.pi) * INVERSE_TWO_PI) != 0.0
+    if wrap:
+        _wrap_angles(out)
 
 
 def range_bearing_residual(r: np.ndarray, station: np.ndarray, y: np.ndarray, reverse: bool) -> np.ndarray:
     """``(3, N)``: ``y - h`` (``reverse``: ``h - y``) of the range, azimuth and elevation ``h`` of the
     positions ``r`` ``(3, N)`` (C-contiguous) seen from ``station`` ``(3,)``, for the measurement ``y``
     ``(3,)``; both angles wrapped to (-pi, pi] when either needs it anywhere, neither otherwise (the numpy
-    code's rule). On every core from :data:`~gpf_nav.kernels.PARALLEL` particles."""
+    code's rule). From :data:`~gpf_nav.kernels.VECTOR_ANGLES` particles with numpy's arctangent."""
     out = np.empty((3, r.shape[1]))
-    kernel = _residual_parallel if r.shape[1] >= PARALLEL else _residual_serial
-    kernel(r, station, y, bool(reverse), out)
+    if r.shape[1] < VECTOR_ANGLES:
+        _residual_scalar(r, station, y, bool(reverse), out)
+        return out
+    geometry = line_of_sight(r, station)  # d (3 rows), horizontal length, range
+    h = out  # (the measurement, then its residual in place)
+    np.arctan2(geometry[1], geometry[0], out=h[1])
+    np.arctan2(geometry[2], geometry[3], out=h[2])
+    h[0] = geometry[4]
+    _difference(h, y, bool(reverse), out)
     return out
 
 
