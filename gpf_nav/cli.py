@@ -26,6 +26,7 @@ import sys
 from gpf_nav.allocator import retain_freed_memory
 from gpf_nav.arguments import USAGE_ERROR
 from gpf_nav.blas import limit_blas_threads
+from gpf_nav.openmp import passive_openmp_waits
 
 COMMANDS = {
     "bench": "gpf_nav.experiments.bench",
@@ -53,6 +54,7 @@ def main(argv: list[str] | None = None) -> int:
         return USAGE_ERROR
     retain_freed_memory()
     limit_blas_threads()
+    passive_openmp_waits()
     module = importlib.import_module(COMMANDS[argv[0]])
     return int(module.main(argv[1:]) or 0)
 

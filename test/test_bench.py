@@ -1,11 +1,12 @@
-"""``gpf-nav bench`` (run small) and the heap tuning the command applies."""
+"""``gpf-nav bench`` (run small) and the heap and OpenMP tuning the command applies."""
 import json
+import os
 import platform
 
 import numpy as np
 import pytest
 
-from gpf_nav import allocator, cli
+from gpf_nav import allocator, cli, openmp
 from gpf_nav.experiments import bench, peer_particles
 
 
@@ -36,6 +37,7 @@ def test_bench_reports_every_filter_and_the_ratio_of_the_same_run(capsys):
     assert report["machine"]["allocator"] == expected
     text = bench.format_table(report)
     assert "GPF/SPF: N=200:" in text and "GPF/GPF-paper: N=200:" in text and f"allocator: {expected}" in text
+    assert report["machine"]["omp_wait_policy"] == os.environ.get("OMP_WAIT_POLICY", "default")
     if peer:
         assert "SPF/particles: N=200:" in text and "GPF-paper/particles: N=200:" in text
 
@@ -45,6 +47,19 @@ def test_retain_freed_memory_applies_on_glibc():
     assert allocator.retain_freed_memory() is True
     assert allocator.retained
     assert np.ones((4, 10_000_000 // 4)).sum() == 10_000_000  # the heap still works with big blocks
+
+
+def test_openmp_waits_are_made_passive_unless_the_user_chose_or_the_threads_run(monkeypatch):
+    from numba.np.ufunc import parallel
+
+    monkeypatch.setattr(parallel, "_is_initialized", False)
+    monkeypatch.setenv("OMP_WAIT_POLICY", "ACTIVE")
+    assert openmp.passive_openmp_waits() is False and os.environ["OMP_WAIT_POLICY"] == "ACTIVE"
+    monkeypatch.delenv("OMP_WAIT_POLICY")
+    monkeypatch.setattr(parallel, "_is_initialized", True)
+    assert openmp.passive_openmp_waits() is False and "OMP_WAIT_POLICY" not in os.environ
+    monkeypatch.setattr(parallel, "_is_initialized", False)
+    assert openmp.passive_openmp_waits() is True and os.environ["OMP_WAIT_POLICY"] == "PASSIVE"
 
 
 def test_bench_steps_follow_the_measurements_in_order():

@@ -17,7 +17,8 @@ from gpf_nav.filters import BootstrapPF, GeometricProjectionPF, MultipleModelGPF
 from gpf_nav.filters.kernel import match_moments
 from gpf_nav.filters.projection import project, select_columns, select_rows
 from gpf_nav.linalg import positive_definite
-from gpf_nav.kernels import VECTOR_ANGLES, bearing, cloud, covariance, information, log_weights, orbit
+from gpf_nav.kernels import (VECTOR_MATH, bearing, cloud, covariance, diagonal_projection, information, log_weights,
+                             orbit)
 from gpf_nav.kernels import curvature as curvature_kernels
 from gpf_nav.kernels.curvature import departure, largest_scaled
 from gpf_nav.kernels.systematic import systematic_ancestors
@@ -85,14 +86,15 @@ def test_the_count_of_particles_beyond_the_state_limit_is_the_numpy_one(count):
         assert cloud.count_outside(x, 1e150) == np.count_nonzero(~(np.abs(x.sum(axis=0)) < 1e150))
 
 
-@pytest.mark.parametrize("count", (*SIZES, 8, 128, 129, 1037, 70_001))  # numpy's summation blocks
+@pytest.mark.parametrize("count", (*SIZES, 8, 128, 129, 1037, VECTOR_MATH, 70_001))  # numpy's summation blocks
 def test_the_log_weight_normalisation_is_the_numpy_one_bit_for_bit(count):
     """The log-sum-exp in numpy's pairwise order, with NaN, zero and dominant weights; every weight zero
     or one infinite gives NaN and writes nothing."""
     rng = np.random.default_rng(60 + count)
     probe = rng.standard_normal(1000) * 30.0
-    # bit for bit where numpy's exp is the C library's (x86-64 without AVX-512); to rounding elsewhere
-    exact = np.array_equal(np.exp(probe), [math.exp(v) for v in probe.tolist()])
+    # with numpy's exp, or the C library's where numpy's is it (x86-64 without AVX-512): bit for bit; else
+    # to rounding
+    exact = count >= VECTOR_MATH or np.array_equal(np.exp(probe), [math.exp(v) for v in probe.tolist()])
     same = np.testing.assert_array_equal if exact else lambda a, b: _close(a, b, atol=1e-300)
     for case in range(-4, 4):
         logw = rng.standard_normal(count) * (30.0 if case >= 0 else 1.0)  # (weights alike: the order shows)
@@ -219,9 +221,11 @@ def test_the_residual_and_the_line_of_sight_are_the_numpy_ones_bit_for_bit(count
 
 
 @pytest.mark.parametrize("count", SIZES)
-def test_the_lunar_measurement_jacobian_is_the_numpy_one_bit_for_bit(count):
+@pytest.mark.parametrize("parallel", (False, True))
+def test_the_lunar_measurement_jacobian_is_the_numpy_one_bit_for_bit(count, parallel, monkeypatch):
     """Every entry, signed zeros included, at orbits with degenerate states (the station, its vertical,
-    NaN, inf) among them."""
+    NaN, inf) among them; serial and on every core."""
+    monkeypatch.setattr(bearing, "PARALLEL", 1 if parallel else 10 ** 9)
     rng = np.random.default_rng(95 + count)
     model = LunarDescentModel(station=(1.7e6, 1e3, 2e3))
     x = _orbits(rng, count)
@@ -234,7 +238,7 @@ def test_the_lunar_measurement_jacobian_is_the_numpy_one_bit_for_bit(count):
     np.testing.assert_array_equal(got.view(np.int64), expected.view(np.int64))
 
 
-@pytest.mark.parametrize("count", (*SIZES, VECTOR_ANGLES, VECTOR_ANGLES + 7))
+@pytest.mark.parametrize("count", (*SIZES, VECTOR_MATH, VECTOR_MATH + 7))
 def test_the_lunar_measurement_residual_is_the_numpy_one_bit_for_bit(count):
     """``y - h(x)`` and ``h(x) - y`` against the numpy measurement and residual, below and from the count
     where numpy's arctangent takes over: azimuths on both sides of the cut (every angle wrapped), none near
@@ -248,7 +252,7 @@ def test_the_lunar_measurement_residual_is_the_numpy_one_bit_for_bit(count):
     # with numpy's arctangent, or the C library's where numpy's is it (x86-64 without AVX-512): bit for
     # bit; else to rounding
     probe = rng.standard_normal((2, 1000))
-    exact = count >= VECTOR_ANGLES or np.array_equal(np.arctan2(*probe),
+    exact = count >= VECTOR_MATH or np.array_equal(np.arctan2(*probe),
                                                      [math.atan2(a, b) for a, b in probe.T.tolist()])
 
     def same(got, expected):
@@ -285,10 +289,12 @@ def test_a_lunar_model_with_its_own_measurement_gets_its_own_residual():
 
 
 @pytest.mark.parametrize("count", SIZES)
-def test_the_orthogonal_projection_is_the_numpy_one_bit_for_bit(count):
+@pytest.mark.parametrize("parallel", (False, True))
+def test_the_orthogonal_projection_is_the_numpy_one_bit_for_bit(count, parallel, monkeypatch):
     """The shift (returned, or added into the particles) and the co-state increment of the lunar
     measurement, every row or two of them, at orbits with degenerate states (the station: a zero
-    Jacobian; NaN) among them."""
+    Jacobian; NaN) among them; serial and on every core."""
+    monkeypatch.setattr(diagonal_projection, "PARALLEL", 1 if parallel else 10 ** 9)
     rng = np.random.default_rng(97 + count)
     model = LunarDescentModel(station=(1.7e6, 1e3, 2e3))
     x = _orbits(rng, count)

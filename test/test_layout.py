@@ -13,7 +13,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "gpf_nav"
 # floor of each top-level module or sub-package of gpf_nav; a new one must be placed here
 FLOORS = {
     "allocator": 0, "arguments": 0, "blas": 0, "collector": 0, "kernels": 0, "linalg": 0, "resampling": 0, "integrity": 0,
-    "schema": 0,
+    "openmp": 0, "schema": 0,
     "models": 0, "sensors": 0, "sim": 0,
     "filters": 1, "registry": 1,
     "estimator": 2,

@@ -13,12 +13,14 @@ machine whose speed drifts (other work, CPU frequency) moves every filter of the
 reported figure is a filter's median block time per step over ``--repeats`` rounds, after a warm-up; the
 ratios (:data:`RATIOS`: GPF/SPF, GPF/GPF-paper, GPF/particles, SPF/particles, GPF-paper/particles) are the
 medians over the rounds of the ratio of the two blocks of a round. ``gpf-nav bench`` runs with the heap
-tuning of :mod:`gpf_nav.allocator` (the report says whether it was applied); ``python -m
-gpf_nav.experiments.bench`` runs with the C library's default allocator, for comparison. ``--node`` runs the ROS node-latency benchmark instead (``gpf_nav.tools.latency``).
+tuning of :mod:`gpf_nav.allocator` and OpenMP's passive waits (:mod:`gpf_nav.openmp`; the report says
+whether each was applied); ``python -m gpf_nav.experiments.bench`` runs with the C library's default
+allocator and OpenMP's default policy, for comparison. ``--node`` runs the ROS node-latency benchmark instead (``gpf_nav.tools.latency``).
 """
 from __future__ import annotations
 
 import json
+import os
 import platform
 import time
 from dataclasses import replace
@@ -139,7 +141,8 @@ def run(particle_counts=PARTICLE_COUNTS, repeats: int = 15, seed: int = 0, filte
     return {"results": results, **ratios,
             "machine": {"python": platform.python_version(), "numpy": np.__version__,
                         "processor": platform.machine(),
-                        "allocator": "retain_freed_memory" if allocator.retained else "default"}}
+                        "allocator": "retain_freed_memory" if allocator.retained else "default",
+                        "omp_wait_policy": os.environ.get("OMP_WAIT_POLICY", "default")}}
 
 
 _LABELS = {"gpf": "GPF", "spf": "SPF", "gpf-paper": "GPF-paper", PEER: "particles"}  # (in the table's ratios)
@@ -158,7 +161,8 @@ def format_table(report: dict) -> str:
         if report.get(key):
             lines.append(f"{_LABELS[numerator]}/{_LABELS[denominator]}: "
                          + ", ".join(f"N={n}: {v:.2f}" for n, v in report[key].items()))
-    lines.append(f"allocator: {report['machine']['allocator']}")
+    lines.append(f"allocator: {report['machine']['allocator']}, OpenMP wait policy: "
+                 f"{report['machine']['omp_wait_policy']}")
     return "\n".join(lines)
 
 

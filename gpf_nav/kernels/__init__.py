@@ -28,7 +28,8 @@ over them vectorise)."""
 PARALLEL = 50_000
 """Particles from which the per-particle kernels (the lunar flow and frames, the flattening's departures) use
 every core."""
-VECTOR_ANGLES = 4_096
-"""Particles from which the lunar measurement's arctangents are numpy's SIMD loops over the whole cloud
-(:func:`~gpf_nav.kernels.bearing.range_bearing_residual`); below it the C library's, one particle at a
-time, the rounding the figures on record (N = 500, ``docs/results.md``) were computed with."""
+VECTOR_MATH = 4_096
+"""Particles from which the kernels' transcendental functions (the lunar measurement's arctangents, the
+weights' exponentials) are numpy's SIMD loops over the whole cloud, the numpy code's results bit for bit on
+every machine; below it the C library's, one particle at a time, in a single pass: the rounding the
+figures on record (N = 500, ``docs/results.md``) were computed with."""

@@ -3,7 +3,7 @@ their Jacobian.
 
 The residual is the measurement, its residual and the angles' wrapping
 (:func:`gpf_nav.models.state_space.wrapped_residual`) without the numpy code's ``(N, 3)`` temporaries. Below
-:data:`~gpf_nav.kernels.VECTOR_ANGLES` particles it is one pass, ``math.atan2`` the C library's, as
+:data:`~gpf_nav.kernels.VECTOR_MATH` particles it is one pass, ``math.atan2`` the C library's, as
 ``np.arctan2`` is where numpy has no SIMD version of its own (x86-64 without AVX-512): there the result is
 the numpy one bit for bit, elsewhere equal to rounding. From it the arctangents are numpy's own over the
 whole cloud (its SIMD loops, several times faster than the C library's one at a time) between two
@@ -18,9 +18,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
-from gpf_nav.kernels import VECTOR_ANGLES
+from gpf_nav.kernels import CHUNK, PARALLEL, VECTOR_MATH
 from gpf_nav.kernels.angles import INVERSE_TWO_PI, TWO_PI
 from gpf_nav.kernels.orbit import line_of_sight
 
@@ -72,9 +72,9 @@ def range_bearing_residual(r: np.ndarray, station: np.ndarray, y: np.ndarray, re
     """``(3, N)``: ``y - h`` (``reverse``: ``h - y``) of the range, azimuth and elevation ``h`` of the
     positions ``r`` ``(3, N)`` (C-contiguous) seen from ``station`` ``(3,)``, for the measurement ``y``
     ``(3,)``; both angles wrapped to (-pi, pi] when either needs it anywhere, neither otherwise (the numpy
-    code's rule). From :data:`~gpf_nav.kernels.VECTOR_ANGLES` particles with numpy's arctangent."""
+    code's rule). From :data:`~gpf_nav.kernels.VECTOR_MATH` particles with numpy's arctangent."""
     out = np.empty((3, r.shape[1]))
-    if r.shape[1] < VECTOR_ANGLES:
+    if r.shape[1] < VECTOR_MATH:
         _residual_scalar(r, station, y, bool(reverse), out)
         return out
     geometry = line_of_sight(r, station)  # d (3 rows), horizontal length, range
@@ -86,16 +86,21 @@ def range_bearing_residual(r: np.ndarray, station: np.ndarray, y: np.ndarray, re
     return out
 
 
-@njit(cache=True, error_model="numpy")
 def range_bearing_jacobian(d: np.ndarray, horizontal: np.ndarray, rho: np.ndarray, min_horizontal: float,
                            min_range: float) -> np.ndarray:
     """``(3, 6, N)``: ``d(range, azimuth, elevation) / d(r, v)`` for the lines of sight ``d`` ``(3, N)``,
     their horizontal lengths and ranges ``(N,)``; the horizontal length floored at ``min_horizontal``
     and the range at ``min_range`` (NaN kept, as ``np.maximum`` keeps it). The velocity columns are
-    zero."""
-    count = rho.size
-    jac = np.empty((3, 6, count))
-    for j in range(count):
+    zero. On every core from :data:`~gpf_nav.kernels.PARALLEL` particles."""
+    jac = np.empty((3, 6, rho.size))
+    kernel = _jacobian_parallel if rho.size >= PARALLEL else _jacobian_serial
+    kernel(d, horizontal, rho, min_horizontal, min_range, jac)
+    return jac
+
+
+@njit(cache=True, error_model="numpy")
+def _jacobian_block(d, horizontal, rho, min_horizontal, min_range, jac, start, stop):
+    for j in range(start, stop):
         d0, d1, d2, h, length = d[0, j], d[1, j], d[2, j], horizontal[j], rho[j]
         hor = min_horizontal if h < min_horizontal else h
         inv_rho = 1.0 / (min_range if length < min_range else length)
@@ -107,4 +112,15 @@ def range_bearing_jacobian(d: np.ndarray, horizontal: np.ndarray, rho: np.ndarra
         jac[2, 0, j], jac[2, 1, j], jac[2, 2, j] = k * d0, k * d1, hor * inv_rho2
         for a in range(3):
             jac[a, 3, j] = jac[a, 4, j] = jac[a, 5, j] = 0.0
-    return jac
+
+
+@njit(cache=True, error_model="numpy")
+def _jacobian_serial(d, horizontal, rho, min_horizontal, min_range, jac):
+    _jacobian_block(d, horizontal, rho, min_horizontal, min_range, jac, 0, rho.size)
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def _jacobian_parallel(d, horizontal, rho, min_horizontal, min_range, jac):
+    for block in prange((rho.size + CHUNK - 1) // CHUNK):
+        _jacobian_block(d, horizontal, rho, min_horizontal, min_range, jac, block * CHUNK,
+                        min(block * CHUNK + CHUNK, rho.size))

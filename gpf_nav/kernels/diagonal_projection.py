@@ -5,16 +5,17 @@ One pass over blocks of :data:`~gpf_nav.kernels.CHUNK` particles: the diagonal `
 relative damping, the co-state increment ``a`` and the shift, added straight into the particles, without
 the whole ``(k, N)`` and ``(n, N)`` temporaries of the numpy reference (``test/numpy_reference.py``). Each
 particle's sums are the ones numpy's ``einsum`` and ``sum(axis=0)`` form on the particle-last Jacobians
-the models build (from 0, term after term in order), so the numbers are the numpy ones bit for bit.
+the models build (from 0, term after term in order), so the numbers are the numpy ones bit for bit. On
+every core from :data:`~gpf_nav.kernels.PARALLEL` particles, with the same arithmetic.
 """
 from __future__ import annotations
 
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
-from gpf_nav.kernels import CHUNK
+from gpf_nav.kernels import CHUNK, PARALLEL
 
 
 @njit(cache=True, error_model="numpy")
@@ -68,7 +69,6 @@ def _shift_block(Ht, columns, r, w, start, size, diagonal, damping, shift, a, ou
             moved[t] += total[t]
 
 
-@njit(cache=True, error_model="numpy")
 def orthogonal_projection(Ht: np.ndarray, columns: np.ndarray, r: np.ndarray, w: np.ndarray,
                           damping_scale: float, out: np.ndarray) -> np.ndarray:
     """Add ``H^T (H_w H_w^T + eps I)^-1 W r`` (whitened) into ``out`` ``(n, N)`` and return
@@ -86,11 +86,27 @@ def orthogonal_projection(Ht: np.ndarray, columns: np.ndarray, r: np.ndarray, w:
 
     Entries of ``a`` that are not finite are 0.
     """
-    k, count = r.shape
-    a = np.empty((k, count))
-    diagonal, damping, shift = np.empty((k, CHUNK)), np.empty(CHUNK), np.empty(CHUNK)
-    for start in range(0, count, CHUNK):
-        size = min(CHUNK, count - start)
-        _diagonal_block(Ht, columns, w, start, size, diagonal, damping, damping_scale)
-        _shift_block(Ht, columns, r, w, start, size, diagonal, damping, shift, a, out)
+    kernel = _projection_parallel if r.shape[1] >= PARALLEL else _projection_serial
+    a = np.empty(r.shape)
+    kernel(Ht, columns, r, w, damping_scale, a, out)
     return a
+
+
+@njit(cache=True, error_model="numpy")
+def _projection_block(Ht, columns, r, w, damping_scale, a, out, start):
+    size = min(CHUNK, r.shape[1] - start)
+    diagonal, damping, shift = np.empty((r.shape[0], CHUNK)), np.empty(CHUNK), np.empty(CHUNK)
+    _diagonal_block(Ht, columns, w, start, size, diagonal, damping, damping_scale)
+    _shift_block(Ht, columns, r, w, start, size, diagonal, damping, shift, a, out)
+
+
+@njit(cache=True, error_model="numpy")
+def _projection_serial(Ht, columns, r, w, damping_scale, a, out):
+    for start in range(0, r.shape[1], CHUNK):
+        _projection_block(Ht, columns, r, w, damping_scale, a, out, start)
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def _projection_parallel(Ht, columns, r, w, damping_scale, a, out):
+    for block in prange((r.shape[1] + CHUNK - 1) // CHUNK):
+        _projection_block(Ht, columns, r, w, damping_scale, a, out, block * CHUNK)

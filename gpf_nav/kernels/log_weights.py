@@ -7,6 +7,9 @@ hundred particles its calls cost more than the arithmetic. Here the sum is numpy
 interleaved partial sums, halved above that), each term computed where it is added, so the total is
 numpy's bit for bit; ``math.exp`` and ``math.log`` are the C library's, as numpy's are where it has no
 SIMD version of its own for float64 (x86-64 without AVX-512: ``test_kernels`` checks it where it runs).
+From :data:`~gpf_nav.kernels.VECTOR_MATH` weights the exponentials are numpy's own over the whole cloud
+(its SIMD loops, several times faster than the C library's one at a time) between passes of the kernel:
+the numpy code's results bit for bit on every machine.
 """
 from __future__ import annotations
 
@@ -14,6 +17,8 @@ import math
 
 import numpy as np
 from numba import njit
+
+from gpf_nav.kernels import VECTOR_MATH
 
 _BLOCK = 128
 """numpy's pairwise-summation block (``PW_BLOCKSIZE``)."""
@@ -79,21 +84,41 @@ def _pairwise(logw: np.ndarray, peak: float) -> float:
 
 
 @njit(cache=True, error_model="numpy")
-def normalise(logw: np.ndarray, normalised: np.ndarray, weights: np.ndarray) -> float:
-    """Normalise the log-weights ``logw`` ``(N,)`` (C-contiguous): NaN entries set to ``-inf`` in place,
-    ``normalised = logw - total`` and ``weights = exp(normalised)`` written (both ``(N,)``), and the
-    log-sum-exp ``total`` returned; NaN, writing neither, when the peak is not finite (every weight zero,
-    or an infinite one)."""
+def _peak(logw: np.ndarray) -> float:
+    """The largest of the log-weights ``logw`` ``(N,)``, NaN entries set to ``-inf`` in place."""
     peak = -math.inf
     for i in range(logw.size):
         value = logw[i]
         if value != value:
             logw[i] = value = -math.inf
         peak = value if value > peak else peak
+    return peak
+
+
+@njit(cache=True, error_model="numpy")
+def _normalise_scalar(logw: np.ndarray, normalised: np.ndarray, weights: np.ndarray) -> float:
+    peak = _peak(logw)
     if not -math.inf < peak < math.inf:
         return math.nan
     total = peak + math.log(_pairwise(logw, peak))
     for i in range(logw.size):
         normalised[i] = value = logw[i] - total
         weights[i] = math.exp(value)
+    return total
+
+
+def normalise(logw: np.ndarray, normalised: np.ndarray, weights: np.ndarray) -> float:
+    """Normalise the log-weights ``logw`` ``(N,)`` (C-contiguous): NaN entries set to ``-inf`` in place,
+    ``normalised = logw - total`` and ``weights = exp(normalised)`` written (both ``(N,)``), and the
+    log-sum-exp ``total`` returned; NaN, writing neither, when the peak is not finite (every weight zero,
+    or an infinite one). From :data:`~gpf_nav.kernels.VECTOR_MATH` weights with numpy's exponential."""
+    if logw.size < VECTOR_MATH:
+        return _normalise_scalar(logw, normalised, weights)
+    peak = _peak(logw)
+    if not -math.inf < peak < math.inf:
+        return math.nan
+    np.subtract(logw, peak, out=normalised)
+    total = float(peak + np.log(np.exp(normalised, out=weights).sum()))
+    np.subtract(logw, total, out=normalised)
+    np.exp(normalised, out=weights)
     return total

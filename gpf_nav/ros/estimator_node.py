@@ -45,6 +45,7 @@ from std_srvs.srv import Trigger
 
 from gpf_nav.allocator import retain_freed_memory
 from gpf_nav.blas import limit_blas_threads
+from gpf_nav.openmp import passive_openmp_waits
 from gpf_nav.collector import freeze_start_up, thaw
 from gpf_nav.estimator.factory import FILTERS
 from gpf_nav.estimator.params import ESTIMATOR, ParameterError
@@ -336,6 +337,7 @@ def main(argv: list[str] | None = None) -> int:
     shutdown transition."""
     retain_freed_memory()
     limit_blas_threads()
+    passive_openmp_waits()
     argv = sys.argv if argv is None else argv
     stop = shutdown.start("estimator", argv)
     if stop is None:
