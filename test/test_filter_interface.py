@@ -115,6 +115,8 @@ def test_every_filter_is_a_filter_and_answers_what_it_declares(make):
         else:
             assert ABSENT[capability](flt), capability
     assert flt.recoveries == 0 and flt.initialized and flt.time > 0 and flt.observability is not None
+    # the last update's log evidence
+    assert isinstance(flt.last_log_likelihood, float) and np.isfinite(flt.last_log_likelihood)
     # the trackers it runs (a multiple-model filter's: one per member); one of them makes its report
     trackers = flt.observability_trackers()
     assert trackers and all(tracker.ready and tracker.updates > 0 for tracker in trackers)

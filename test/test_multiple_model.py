@@ -197,7 +197,7 @@ def test_a_member_that_refuses_a_component_takes_the_lowest_evidence_and_the_oth
 
     def scripted(member, evidence, refuses):
         def update(y, sensor=None):
-            member.log_likelihood = member.last_log_likelihood = evidence  # (a GPF's, an EKF's)
+            member.last_log_likelihood = evidence
             member.gated += refuses
         return update
 
@@ -211,8 +211,10 @@ def test_a_member_that_refuses_a_component_takes_the_lowest_evidence_and_the_oth
     prior, mu = weigh((0.0, 50.0, -3.0), (0, 1, 0))  # the middle member refuses: it gets -3, the lowest
     expected = prior * np.exp(np.array([0.0, -3.0, -3.0]))
     np.testing.assert_allclose(mu, expected / expected.sum(), rtol=1e-12)
+    assert f.last_log_likelihood == pytest.approx(np.log(expected.sum()), rel=1e-12)  # log sum_j c_j p(y | j)
     prior, mu = weigh((0.0, 50.0, -3.0), (1, 1, 1))  # every member refused: the probabilities stay
     np.testing.assert_allclose(mu, prior, rtol=1e-12)
+    assert f.last_log_likelihood == 0.0
 
 
 def test_the_narrow_members_are_gated_compensated_ekfs_unless_asked_for_gpfs():

@@ -51,6 +51,11 @@ class SensorBiasFilter(Composite):
         """:attr:`filter`."""
         return (self.filter,)
 
+    @property
+    def last_log_likelihood(self) -> float:
+        """:attr:`filter`'s."""
+        return self.filter.last_log_likelihood
+
     def delegate(self, capability: str) -> Filter:
         """:attr:`filter` answers every capability but the sensor biases."""
         return self.filter

@@ -23,9 +23,8 @@ class EnsembleKF(Filter):
         n_particles: ensemble size ``N >= 2``.
         seed: seed (or generator) of the filter's random stream; same seed, same output.
 
-    Attributes:
-        last_log_likelihood: ``log N(r; 0, Pyy)`` of the ensemble-mean innovation ``r`` over the measured
-            rows at the last update; 0.0 when nothing was measured.
+    :attr:`last_log_likelihood` is ``log N(r; 0, Pyy)`` of the ensemble-mean innovation ``r`` over the
+    measured rows at the last update.
     """
 
     def __init__(self, model: StateSpaceModel, n_particles: int = N_PARTICLES,
@@ -37,7 +36,6 @@ class EnsembleKF(Filter):
         self._X = np.zeros((self.n_particles, model.state_dim))
         self._weights = np.full(self.n_particles, 1.0 / self.n_particles)
         self._noise = ModelNoise(model)
-        self.last_log_likelihood = 0.0
 
     def initialize(self, mean: np.ndarray, cov: np.ndarray, t0: float = 0.0) -> None:
         """Draw the ``N`` members from ``N(mean (n,), cov (n, n))``."""

@@ -86,6 +86,10 @@ class Filter(ABC):
     Attributes:
         recoveries: how many times the filter re-initialised itself (see :meth:`_recover`).
         last_recovery_reason: why it last did, or None.
+        last_log_likelihood: the last update's log evidence ``log p(y | earlier data)``: a particle
+            filter's estimate from its weights, a Gaussian filter's ``log N(r; 0, S)`` of the innovation, a
+            multiple-model filter's mixture of its members'; 0 before the first update and after one that
+            measured nothing.
 
     The attributes of the optional capabilities (:data:`CAPABILITIES`) follow; a filter that has one names
     it in :attr:`capabilities` and overrides them, the others read the absent value given here.
@@ -147,6 +151,7 @@ class Filter(ABC):
         self.initialized = False
         self.recoveries = 0
         self.last_recovery_reason: str | None = None
+        self.last_log_likelihood = 0.0
         self.recovery_inflation = 10.0
         self._last_good: tuple[np.ndarray, np.ndarray] | None = None
         self._recovering = False

@@ -112,12 +112,8 @@ def readonly_view(a: np.ndarray) -> np.ndarray:
 
 
 class _GaussianFilter(Filter):
-    """State ``N(x (n,), P (n, n))`` shared by the EKF and the UKF.
-
-    Attributes:
-        last_log_likelihood: Gaussian log-likelihood ``log N(r; 0, S)`` of the last update's innovation
-            over the measured rows; 0.0 when nothing was measured.
-    """
+    """State ``N(x (n,), P (n, n))`` shared by the EKF and the UKF; :attr:`last_log_likelihood` is the
+    Gaussian ``log N(r; 0, S)`` of the last update's innovation over the measured rows."""
 
     def __init__(self, model: StateSpaceModel, seed: int | np.random.Generator | None = None):
         super().__init__(model, seed)
@@ -125,7 +121,6 @@ class _GaussianFilter(Filter):
         self._x = np.zeros(n)
         self._P = np.zeros((n, n))
         self._noise = ModelNoise(model)
-        self.last_log_likelihood = 0.0
 
     def initialize(self, mean: np.ndarray, cov: np.ndarray, t0: float = 0.0) -> None:
         self._x, self._P = self._check_prior(mean, cov, t0)

@@ -36,8 +36,9 @@ Each cycle is Blom's interacting multiple model (IMM):
    probable, so a small, slowly observable force is never learnt.
 2. Each member predicts and updates on its own model.
 3. **Model probabilities** ``mu_j ∝ c_j p(y | j)``, ``p(y | j)`` the member's incremental evidence
-   (:attr:`ParticleFilter.log_likelihood`, exact for the GPF's corrected weights; the EKF's Gaussian
-   ``log N(r; 0, S)``). A member that did
+   (:attr:`~gpf_nav.filters.interface.Filter.last_log_likelihood`: the GPF's from its corrected weights,
+   the EKF's Gaussian ``log N(r; 0, S)``), and the filter's evidence ``log sum_j c_j p(y | j)``. A member
+   that did
    not weigh the whole measurement (its gate refused a component, or it re-initialised) has no
    evidence comparable with the others': it takes the lowest of theirs, since it found the measurement
    no more probable than the least of the members that used it. Leaving every probability at ``c``
@@ -217,6 +218,7 @@ class MultipleModelGPF(Composite):
         self._predicted_probabilities = self.model_probabilities
         self._mix_due = False
         self._moments = None
+        self.last_log_likelihood = 0.0
 
     own_capabilities = frozenset({CLOUD, RESAMPLING, GATE, TEMPERING, MODEL_PROBABILITIES, COMPENSATION})
 
@@ -262,12 +264,15 @@ class MultipleModelGPF(Composite):
             member.update(y, sensor)
         refused = np.array([(m.gated, m.recoveries) != b for m, b in zip(self.members, before)])
         mu = self._predicted_probabilities
+        self.last_log_likelihood = 0.0
         if not refused.all():
-            evidence = np.array([_evidence(m) for m in self.members])
+            evidence = np.array([m.last_log_likelihood for m in self.members])
             evidence[refused] = evidence[~refused].min()  # (step 3 of the module docstring)
-            posterior = mu * np.exp(evidence - evidence.max())
+            peak = evidence.max()
+            posterior = mu * np.exp(evidence - peak)
             if np.isfinite(posterior).all() and posterior.sum() > 0.0:  # else the data cannot tell them apart
                 mu = posterior
+                self.last_log_likelihood = float(peak + math.log(posterior.sum()))
         if self.nesting_gate > 0.0:
             admitted = np.where(self._nested(), mu, 0.0)
             mu = admitted if admitted.sum() > 0.0 else np.eye(mu.size)[-1]
@@ -408,14 +413,6 @@ def _variances(cov: np.ndarray, directions: np.ndarray) -> np.ndarray:
     """``(d,)`` variances ``v^T P v`` of the covariance ``cov`` ``(n, n)`` along each column ``v`` of
     ``directions`` ``(n, d)``."""
     return np.einsum("id,ij,jd->d", directions, cov, directions)
-
-
-def _evidence(member: Filter) -> float:
-    """The member's log evidence of its last update: a particle filter's incremental evidence, a
-    Gaussian filter's ``log N(r; 0, S)``."""
-    if isinstance(member, GeometricProjectionPF):
-        return member.log_likelihood
-    return member.last_log_likelihood
 
 
 def _sigma_points(member: Filter) -> np.ndarray:

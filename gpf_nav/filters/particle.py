@@ -116,7 +116,6 @@ class ParticleFilter(Filter):
         self.ess = 1.0
         self.resampled = False
         self.resample_count = 0
-        self.log_likelihood = 0.0
         self._costate = np.zeros((self.n_particles, model.measurement_dim))
         self._costate_rows = np.zeros(model.measurement_dim, bool)
 
@@ -257,7 +256,7 @@ class ParticleFilter(Filter):
         if evidence is None:  # the filter re-initialised itself
             return
         self.tempered_updates += self.tempering_stages > 1
-        self.log_likelihood = evidence
+        self.last_log_likelihood = evidence
         self.proposal.observed(sensor.name, y, rows)
         self._check_collapse()
         self._updates += 1
@@ -304,7 +303,7 @@ class ParticleFilter(Filter):
             if total is None:
                 self._recover("every particle weight is zero or NaN")
                 return None, rows
-            self.log_likelihood = total  # (the previous log-weights are normalised)
+            self.last_log_likelihood = total  # (the previous log-weights are normalised)
             # the effective sample size
             self.ess = resamplers.effective_sample_size(self._weights) / self.n_particles
             resampling = self.ess < self.ess_threshold
@@ -323,7 +322,7 @@ class ParticleFilter(Filter):
                 self._set_uniform_weights()
                 self.resampled = True
                 self.resample_count += 1
-            evidence += self.log_likelihood
+            evidence += self.last_log_likelihood
             if schedule.accepted(rows):
                 return evidence, rows
 
