@@ -1,5 +1,8 @@
 """The particle filters' standard normal draws (:mod:`gpf_nav.filters.normal_draws`): the generator's own
 below the row streams' size, reproducible and independent of the threads from it, and standard normal."""
+import os
+import threading
+
 import numpy as np
 import pytest
 
@@ -65,3 +68,33 @@ def test_a_large_bootstrap_filter_is_reproducible_bit_for_bit():
             pf.update(y)
         means.append(pf.mean)
     np.testing.assert_array_equal(means[0], means[1])
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="fork only")
+def test_a_forked_child_draws_on_a_pool_of_its_own():
+    """The parent's pool threads are not in a forked child: its large draws still complete, with the
+    parent's numbers for the same seed."""
+    expected = NormalDraws(np.random.default_rng(21))(6, ROW_STREAMS)  # (the parent's pool now exists)
+    read, write = os.pipe()
+    child = os.fork()
+    if child == 0:  # pragma: no cover (the child)
+        try:
+            same = np.array_equal(NormalDraws(np.random.default_rng(21))(6, ROW_STREAMS), expected)
+            os.write(write, b"1" if same else b"0")
+        finally:
+            os._exit(0)
+    os.close(write)
+    signal = threading.Event()
+    answer = []
+
+    def receive():
+        answer.append(os.read(read, 1))
+        signal.set()
+
+    threading.Thread(target=receive, daemon=True).start()
+    finished = signal.wait(30)
+    if not finished:
+        os.kill(child, 9)
+    os.waitpid(child, 0)
+    assert finished, "the child's draw did not complete"
+    assert answer == [b"1"]

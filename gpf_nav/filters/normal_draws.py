@@ -71,3 +71,13 @@ def _threads() -> ThreadPoolExecutor:
     if _pool is None:
         _pool = ThreadPoolExecutor(max_workers=max(_workers() - 1, 1), thread_name_prefix="gpf_nav_normals")
     return _pool
+
+
+def _forget_pool() -> None:
+    """In a forked child: the parent's pool threads were not copied, so a pool of its own is made when needed."""
+    global _pool
+    _pool = None
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_pool)
