@@ -93,20 +93,23 @@ def orthogonal_projection(Ht: np.ndarray, columns: np.ndarray, r: np.ndarray, w:
 
 
 @njit(cache=True, error_model="numpy")
-def _projection_block(Ht, columns, r, w, damping_scale, a, out, start):
+def _projection_block(Ht, columns, r, w, damping_scale, a, out, start, diagonal, damping, shift):
+    """The particles ``start`` to ``start + CHUNK``, with the scratch rows ``diagonal`` ``(k, CHUNK)``,
+    ``damping`` and ``shift`` ``(CHUNK,)``."""
     size = min(CHUNK, r.shape[1] - start)
-    diagonal, damping, shift = np.empty((r.shape[0], CHUNK)), np.empty(CHUNK), np.empty(CHUNK)
     _diagonal_block(Ht, columns, w, start, size, diagonal, damping, damping_scale)
     _shift_block(Ht, columns, r, w, start, size, diagonal, damping, shift, a, out)
 
 
 @njit(cache=True, error_model="numpy")
 def _projection_serial(Ht, columns, r, w, damping_scale, a, out):
+    diagonal, damping, shift = np.empty((r.shape[0], CHUNK)), np.empty(CHUNK), np.empty(CHUNK)
     for start in range(0, r.shape[1], CHUNK):
-        _projection_block(Ht, columns, r, w, damping_scale, a, out, start)
+        _projection_block(Ht, columns, r, w, damping_scale, a, out, start, diagonal, damping, shift)
 
 
 @njit(cache=True, error_model="numpy", parallel=True)
 def _projection_parallel(Ht, columns, r, w, damping_scale, a, out):
     for block in prange((r.shape[1] + CHUNK - 1) // CHUNK):
-        _projection_block(Ht, columns, r, w, damping_scale, a, out, block * CHUNK)
+        _projection_block(Ht, columns, r, w, damping_scale, a, out, block * CHUNK, np.empty((r.shape[0], CHUNK)),
+                          np.empty(CHUNK), np.empty(CHUNK))
