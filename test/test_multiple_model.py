@@ -3,6 +3,7 @@ problems whose exact answers are known: it picks the model that generated the da
 unmodelled acceleration, and then gives that model's Kalman posterior."""
 import numpy as np
 import pytest
+from scipy.stats import chi2
 
 from gpf_nav.filters import GeometricProjectionPF, MultipleModelGPF
 from gpf_nav.models import LinearGaussianModel
@@ -12,9 +13,12 @@ from test_compensation import SIGMA, TAU, _kalman_of_augmented, augmented_linear
 MEAN, COV = np.array([0.0, 1.0]), np.diag([4.0, 1.0])
 
 
-def run(ys, seed=0, scales=(0.01, 1.0), times=(1.0, 1.0)):
+def run(ys, seed=0, scales=(0.01, 1.0), times=(1.0, 1.0), size_gate=0.0):
+    """The IMM on ``ys``; without the size gate by default, so that the evidence alone picks the members
+    (the gate is tested on its own)."""
     f = MultipleModelGPF(constant_velocity(), 1000, seed=seed, unmodelled_acceleration_std=SIGMA,
-                         unmodelled_acceleration_time=TAU, compensation_scales=scales, compensation_times=times)
+                         unmodelled_acceleration_time=TAU, compensation_scales=scales, compensation_times=times,
+                         size_gate=size_gate)
     f.initialize(MEAN, COV)
     for y in ys:
         f.predict(1.0)
@@ -70,6 +74,37 @@ def test_a_small_acceleration_selects_the_member_of_its_scale():
     sd = np.sqrt(np.diag(exact_cov))
     np.testing.assert_array_less(np.abs(f.mean - exact_mean[:2]), 0.3 * sd[:2])
     np.testing.assert_allclose(np.sqrt(np.diag(f.covariance)), sd[:2], rtol=0.3)
+
+
+def test_the_size_gate_refuses_a_member_whose_acceleration_is_beyond_its_prior():
+    """The data of the previous test, an acceleration of the 0.1 member's size that wanders up to beyond
+    its prior's 0.8 quantile (1.28 sigmas for one component): after every update whose estimate of that
+    member lies beyond it, the member's probability is 0, whatever its evidence; without the gate the
+    evidence keeps it the most probable throughout the second half."""
+    small = 0.1 * SIGMA
+    ys = simulate(augmented_linear(constant_velocity(), small), np.array([0.0, 1.0, 3.0 * small]), 150, 1.0,
+                  seed=14)
+    limit = np.sqrt(chi2.ppf(0.8, 1))
+
+    def probabilities(gate):
+        f = MultipleModelGPF(constant_velocity(), 1000, seed=0, unmodelled_acceleration_std=SIGMA,
+                             unmodelled_acceleration_time=TAU, compensation_scales=(0.1, 1.0),
+                             compensation_times=(1.0, 1.0), size_gate=gate)
+        f.initialize(MEAN, COV)
+        out = []
+        for y in ys:
+            f.predict(1.0)
+            f.update(y)
+            out.append((abs(f.scaled[0].unmodelled_acceleration[0]) / small, f.model_probabilities[1]))
+        return np.array(out)
+
+    gated, free = probabilities(0.8), probabilities(0.0)
+    beyond = gated[:, 0] > limit
+    assert beyond.sum() >= 5 and np.all(gated[beyond, 1] == 0.0)
+    assert np.all(free[75:, 1] > 0.5)
+    for gate in (-0.1, 1.0):
+        with pytest.raises(ValueError, match="size_gate"):
+            MultipleModelGPF(constant_velocity(), size_gate=gate)
 
 
 def test_a_varying_acceleration_selects_the_member_of_its_correlation_time():

@@ -14,7 +14,7 @@ from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD, UNMODELLED_
 from gpf_nav.filters.interface import N_PARTICLES
 from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
 from gpf_nav.filters.multiple_model import (COMPENSATION_SCALES, COMPENSATION_TIMES, NARROW_FILTER, NARROW_FILTERS,
-                                            NESTING_GATE, SWITCH_TIME)
+                                            NESTING_GATE, SIZE_GATE, SWITCH_TIME)
 from gpf_nav.models.gravity import FIELDS, make_field
 from gpf_nav.models.lunar import LunarDescentModel
 
@@ -31,7 +31,8 @@ def make_filter(name: str, model, *, n_particles: int = N_PARTICLES, seed: int |
                 nominal_prior: float = NOMINAL_PRIOR, kernel_bandwidth: float = 0.0,
                 flattening_horizon: float = registry.FLATTENING_HORIZON, model_switch_time: float = SWITCH_TIME,
                 compensation_scales=COMPENSATION_SCALES, compensation_times=COMPENSATION_TIMES,
-                nesting_gate: float = NESTING_GATE, narrow_filter: str = NARROW_FILTER, collapse_steps: int = 0,
+                nesting_gate: float = NESTING_GATE, size_gate: float = SIZE_GATE, narrow_filter: str = NARROW_FILTER,
+                collapse_steps: int = 0,
                 resampling: str = "systematic", ess_threshold: float = 0.5, compute_costate: bool = True,
                 ukf_alpha: float = 1e-3, ukf_beta: float = 2.0, ukf_kappa: float = 0.0):
     """Build the node's filter ``name`` (one of :data:`FILTERS`, an entry of :mod:`gpf_nav.registry`) on
@@ -55,7 +56,7 @@ def make_filter(name: str, model, *, n_particles: int = N_PARTICLES, seed: int |
                                   nominal_prior=nominal_prior, kernel_bandwidth=kernel_bandwidth,
                                   flattening_horizon=flattening_horizon, model_switch_time=model_switch_time,
                                   compensation_scales=compensation_scales, compensation_times=compensation_times,
-                                  nesting_gate=nesting_gate, narrow_filter=narrow_filter)
+                                  nesting_gate=nesting_gate, size_gate=size_gate, narrow_filter=narrow_filter)
     if errors:
         raise ValueError("; ".join(errors))
     seed = None if seed is None or int(seed) < 0 else int(seed)
@@ -64,7 +65,8 @@ def make_filter(name: str, model, *, n_particles: int = N_PARTICLES, seed: int |
                    unmodelled_acceleration_time=unmodelled_acceleration_time, nominal_prior=nominal_prior,
                    switch_time=model_switch_time,
                    compensation_scales=_floats(compensation_scales), compensation_times=_floats(compensation_times),
-                   nesting_gate=float(nesting_gate), narrow_filter=narrow_filter, resampling=resampling,
+                   nesting_gate=float(nesting_gate), size_gate=float(size_gate), narrow_filter=narrow_filter,
+                   resampling=resampling,
                    ess_threshold=ess_threshold,
                    collapse_steps=int(collapse_steps), compute_costate=bool(compute_costate),
                    alpha=ukf_alpha, beta=ukf_beta, kappa=ukf_kappa)
@@ -83,7 +85,7 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
                          unmodelled_acceleration_time=1.0, nominal_prior=0.0, kernel_bandwidth=0.0,
                          flattening_horizon=0.0, model_switch_time=SWITCH_TIME,
                          compensation_scales=COMPENSATION_SCALES,
-                         compensation_times=COMPENSATION_TIMES, nesting_gate=NESTING_GATE,
+                         compensation_times=COMPENSATION_TIMES, nesting_gate=NESTING_GATE, size_gate=SIZE_GATE,
                          narrow_filter=NARROW_FILTER) -> list[str]:
     """Human-readable errors for invalid filter parameters (empty when all are valid)."""
     from gpf_nav import resampling as resamplers
@@ -122,6 +124,8 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
                           "compensation scale, the last 1")
         if not (isinstance(nesting_gate, (int, float)) and 0.0 <= nesting_gate < 1.0):
             errors.append(f"parameter 'nesting_gate' = {nesting_gate!r} must lie in [0, 1)")
+        if not (isinstance(size_gate, (int, float)) and 0.0 <= size_gate < 1.0):
+            errors.append(f"parameter 'size_gate' = {size_gate!r} must lie in [0, 1)")
         if narrow_filter not in NARROW_FILTERS:
             errors.append(f"parameter 'narrow_filter' = {narrow_filter!r} must be one of {', '.join(NARROW_FILTERS)}")
     if entry.kind == "gpf":

@@ -25,7 +25,7 @@ from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD, UNMODELLED_
 from gpf_nav.filters.interface import N_PARTICLES
 from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
 from gpf_nav.filters.multiple_model import (COMPENSATION_SCALES, COMPENSATION_TIMES, NARROW_FILTER, NARROW_FILTERS,
-                                            NESTING_GATE, SWITCH_TIME)
+                                            NESTING_GATE, SIZE_GATE, SWITCH_TIME)
 from gpf_nav.models.gravity import FIELDS
 from gpf_nav.models.lunar import MU_MOON
 from gpf_nav.registry import FLATTENING_HORIZON
@@ -58,6 +58,7 @@ ESTIMATOR = [
         Spec("compensation_scales", list(COMPENSATION_SCALES), "gpf: the compensated members' acceleration stds as fractions of unmodelled_acceleration_std, increasing to 1: one member per scale beside the nominal one, so that a force from far below to the size of unmodelled_acceleration_std has a member of its size.", bounds="(0, 1]", checked_by=_BY_FILTER),
         Spec("compensation_times", list(COMPENSATION_TIMES), "gpf: the compensated members' correlation times as fractions of unmodelled_acceleration_time, one per compensation scale, the last 1: a member of short time follows a force that varies along the orbit.", bounds="> 0", checked_by=_BY_FILTER),
         Spec("nesting_gate", NESTING_GATE, "gpf: chi-square probability of the gate by which the widest compensated member must admit another member's estimate for it to keep its probability while the data leave a direction undetermined (a member that explains an error the data cannot see with a narrower model); 0: no gate.", bounds="[0, 1)", checked_by=_BY_FILTER),
+        Spec("size_gate", SIZE_GATE, "gpf: chi-square probability of the gate beyond which a narrow compensated member's estimated acceleration, in its own prior's sigmas, says the force is a wider member's size: the member loses its probability for that update; 0: no gate.", bounds="[0, 1)", checked_by=_BY_FILTER),
         Spec("narrow_filter", NARROW_FILTER, "gpf: the filter of the compensated members narrower than the widest: ekf (a compensated EKF with the GPF's innovation gate; the nominal and the widest member stay GPFs) or gpf.", choices=NARROW_FILTERS, checked_by=_BY_FILTER),
         Spec("model_switch_time", SWITCH_TIME, "gpf: mean sojourn time of the nominal / compensated model chain.", "s", "> 0", checked_by=_BY_FILTER),
         Spec("kernel_bandwidth", 0.0, "gpf, cloud metric: kernel bandwidth h; 0: the default, the Gaussian-optimal one for N and the state dimension, 1.6 times it while an update is tempered or gated (gpf-single: 1.6 times it always; at most 0.95).", bounds="[0, 1)", symbol="h", checked_by=_BY_FILTER),

@@ -63,6 +63,15 @@ Each cycle is Blom's interacting multiple model (IMM):
    data never determined (an EKF linearised across a cloud far wider than the measurement's curvature
    allows, e.g. a 20 km prior with range only, collapses along the unseen rotations to a few per cent
    of the prior's variance) and is zeroed too.
+5. **Size gate** (``size_gate`` > 0), in every update: a narrow member whose estimated acceleration lies
+   beyond the ``size_gate`` quantile of its own prior (``a^T a / sigma_j^2`` above ``chi^2_p``) gets
+   probability 0 for that update, like the nesting gate's refusals. Its estimate says the force is of a
+   wider member's size: with the scales a few times apart, a force beyond about two of a member's sigmas
+   lies well inside the next member's prior. Without the gate a member too small for the force can still
+   win the evidence (it follows the measured part of the force with a shrunk, lagging acceleration) and
+   turn the rest into an error where the data are weakest: a 2 % gravity mismatch without azimuth, where
+   the 1e-2 m/s^2 member, its acceleration at 2.4 of its sigmas, won against the members of the force's
+   size.
 
 The estimate is the mixture ``sum_j mu_j N(m_j, P_j)`` (mean and covariance of the user's state); the
 unmodelled acceleration is the mixture of the compensated members' and the nominal model's zero.
@@ -116,6 +125,12 @@ NESTING_GATE = 0.999
 member's estimate for that member to keep its probability, while the data leave a direction undetermined
 (0: no gate). Without it, where the data cannot see a direction (no azimuth) a small, fast
 member explains the error left there with a wrong state and wins the evidence."""
+SIZE_GATE = 0.8
+"""Probability of the size gate (step 5 of the module docstring; 0: no gate): a narrow member whose estimated
+acceleration lies beyond this quantile of its own prior (``a^T a / sigma^2 > chi^2_p``, 2.15 sigmas for
+``p = 3``) is refused. Members of the force's size keep theirs well inside it (the Moon's J2 at 0.46 of the
+1e-3 m/s^2 member's sigma, a 2 % gravity mismatch at 1 of the 0.03 m/s^2 member's); at 0.99 (3.4 sigmas) the
+gate never fires against a 2 % mismatch, and the 1e-2 m/s^2 member keeps winning there."""
 NESTING_SPREAD = 0.5
 """Fraction of the nominal member's variance along each undetermined direction below which a narrow
 compensated member is refused by the nesting gate (step 4 of the module docstring). The bound of exact
@@ -145,6 +160,7 @@ class MultipleModelGPF(Composite):
             positive, the last 1, one per scale (default :data:`COMPENSATION_TIMES`).
         nesting_gate: probability of the nesting gate in [0, 1) (step 4; 0: none; default
             :data:`NESTING_GATE`).
+        size_gate: probability of the size gate in [0, 1) (step 5; 0: none; default :data:`SIZE_GATE`).
         narrow_filter: the filter of the compensated members narrower than the widest, one of
             :data:`NARROW_FILTERS` (default :data:`NARROW_FILTER`): ``ekf`` a
             :class:`~gpf_nav.filters.compensated.CompensatedEKF` with the GPF members' ``outlier_gate`` and
@@ -167,7 +183,8 @@ class MultipleModelGPF(Composite):
                  seed: int | np.random.Generator | None = None,
                  compensation_scales: tuple[float, ...] = COMPENSATION_SCALES,
                  compensation_times: tuple[float, ...] = COMPENSATION_TIMES,
-                 nesting_gate: float = NESTING_GATE, narrow_filter: str = NARROW_FILTER, **options):
+                 nesting_gate: float = NESTING_GATE, size_gate: float = SIZE_GATE,
+                 narrow_filter: str = NARROW_FILTER, **options):
         if not (math.isfinite(switch_time) and switch_time > 0):
             raise ValueError(f"switch_time must be positive, got {switch_time}")
         scales = tuple(float(s) for s in compensation_scales)
@@ -178,6 +195,8 @@ class MultipleModelGPF(Composite):
             raise ValueError(f"compensation_times must be positive, one per scale, the last 1; got {compensation_times}")
         if not 0.0 <= nesting_gate < 1.0:
             raise ValueError(f"nesting_gate must lie in [0, 1), got {nesting_gate}")
+        if not 0.0 <= size_gate < 1.0:
+            raise ValueError(f"size_gate must lie in [0, 1), got {size_gate}")
         if narrow_filter not in NARROW_FILTERS:
             raise ValueError(f"narrow_filter must be one of {NARROW_FILTERS}, got {narrow_filter!r}")
         super().__init__(model)
@@ -212,6 +231,9 @@ class MultipleModelGPF(Composite):
         self.narrow_filter = narrow_filter
         self.nesting_gate = float(nesting_gate)
         self._nesting_limit = float(chi2.ppf(nesting_gate, model.state_dim)) if nesting_gate else math.inf
+        self.size_gate = float(size_gate)
+        p = self.compensated.model.state_dim - model.state_dim  # (the acceleration's components)
+        self._size_limit = float(chi2.ppf(size_gate, p)) if size_gate else math.inf
         self.compensation_scales, self.compensation_times = scales, times
         self.switch_time = float(switch_time)
         self.model_probabilities = np.full(len(self.members), 1.0 / len(self.members))
@@ -273,12 +295,25 @@ class MultipleModelGPF(Composite):
             if np.isfinite(posterior).all() and posterior.sum() > 0.0:  # else the data cannot tell them apart
                 mu = posterior
                 self.last_log_likelihood = float(peak + math.log(posterior.sum()))
-        if self.nesting_gate > 0.0:
-            admitted = np.where(self._nested(), mu, 0.0)
+        if self.nesting_gate > 0.0 or self.size_gate > 0.0:
+            admitted = self._sized()
+            if self.nesting_gate > 0.0:
+                admitted &= self._nested()
+            admitted = np.where(admitted, mu, 0.0)
             mu = admitted if admitted.sum() > 0.0 else np.eye(mu.size)[-1]
         self.model_probabilities = mu / mu.sum()
         self._predicted_probabilities = self.model_probabilities
         self._mix_due = True
+
+    def _sized(self) -> np.ndarray:
+        """``(K,)`` bool: the members the size gate admits (step 5 of the module docstring): the nominal and
+        the widest always, a narrow one while ``a^T a / sigma^2`` of its estimated acceleration ``a`` is
+        within the gate."""
+        admitted = np.ones(len(self.members), dtype=bool)
+        for j, member in enumerate(self.scaled[:-1], 1):
+            a = member.unmodelled_acceleration
+            admitted[j] = bool(float(a @ a) / member.model.acceleration_std ** 2 <= self._size_limit)
+        return admitted
 
     def _nested(self) -> np.ndarray:
         """``(K,)`` bool: the members whose estimate of the user's state the widest member's posterior
