@@ -33,9 +33,6 @@ import time
 import traceback
 from collections import Counter
 
-import rclpy
-import rclpy.exceptions
-import rclpy.logging
 from diagnostic_msgs.msg import KeyValue
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
@@ -339,21 +336,8 @@ def main(argv: list[str] | None = None) -> int:
     limit_blas_threads()
     passive_openmp_waits()
     argv = sys.argv if argv is None else argv
-    stop = shutdown.start("estimator", argv)
-    if stop is None:
-        return 2
-    try:
-        node = EstimatorNode(params_files=params_files(argv))
-    except (ParameterError, rclpy.exceptions.InvalidParameterTypeException,
-            rclpy.exceptions.InvalidParameterValueException) as err:
-        rclpy.logging.get_logger(NODE_NAME).fatal(f"refusing to start: {err}")
-        rclpy.try_shutdown()
-        return 2
-    try:
-        shutdown.spin_until(node, stop, done=lambda: node.finalized)
-    finally:
-        shutdown.close(node)
-    return 0
+    return shutdown.run("estimator", NODE_NAME, lambda: EstimatorNode(params_files=params_files(argv)), argv,
+                        done=lambda node: node.finalized)
 
 
 __all__ = ["EstimatorNode", "main", "FILTERS", "NODE_NAME"]

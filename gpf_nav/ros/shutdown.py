@@ -8,11 +8,12 @@ a signal into ``KeyboardInterrupt`` wherever Python happens to be, for example i
 rclpy without its own; :func:`spin_until` notices the request within ``period`` s; :func:`close`
 destroys the node and shuts rclpy down while the handlers are still in place (a repeated signal just
 repeats the request), then ignores the signals until the process has exited; the console script
-returns 0.
+returns 0. :func:`run` is the whole life of a console-script node in that order.
 """
 from __future__ import annotations
 
 import signal
+import time
 from typing import Callable
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -92,3 +93,34 @@ def close(node) -> None:
         rclpy.try_shutdown()
         for sig in SIGNALS:
             signal.signal(sig, signal.SIG_IGN)
+
+
+def run(program: str, logger: str, build: Callable[[], object], argv: list[str], done: Callable[[object], bool],
+        linger: float = 0.0) -> int:
+    """A console-script node's life: :func:`start` (2 on bad arguments), ``build()`` the node (2 after a
+    FATAL line on ``logger`` when its parameters are invalid), spin until a stop request or ``done(node)``,
+    then ``linger`` s more (so that reliable subscribers receive the last messages), :func:`close`; 0."""
+    import rclpy
+    import rclpy.exceptions
+    import rclpy.logging
+
+    from gpf_nav.schema import ParameterError
+
+    stop = start(program, argv)
+    if stop is None:
+        return 2
+    try:
+        node = build()
+    except (ParameterError, rclpy.exceptions.InvalidParameterTypeException,
+            rclpy.exceptions.InvalidParameterValueException) as err:
+        rclpy.logging.get_logger(logger).fatal(f"refusing to start: {err}")
+        rclpy.try_shutdown()
+        return 2
+    try:
+        spin_until(node, stop, done=lambda: done(node))
+        if linger > 0.0:
+            end = time.monotonic() + linger
+            spin_until(node, stop, done=lambda: time.monotonic() > end)
+    finally:
+        close(node)
+    return 0

@@ -19,9 +19,6 @@ import sys
 import time
 
 import numpy as np
-import rclpy
-import rclpy.exceptions
-import rclpy.logging
 from geometry_msgs.msg import PoseWithCovarianceStamped, TwistWithCovarianceStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
@@ -263,23 +260,8 @@ def main(argv: list[str] | None = None) -> int:
     """Console script ``simulator``: exits 0 at the end of the trajectory (unless ``loop``) and when
     stopped by SIGINT or SIGTERM (:mod:`gpf_nav.ros.shutdown`), 2 on invalid parameters."""
     argv = sys.argv if argv is None else argv
-    stop = shutdown.start("simulator", argv)
-    if stop is None:
-        return 2
-    try:
-        node = SimulatorNode(params_files=params_files(argv))
-    except (ParameterError, rclpy.exceptions.InvalidParameterTypeException,
-            rclpy.exceptions.InvalidParameterValueException) as err:
-        rclpy.logging.get_logger(NODE_NAME).fatal(f"refusing to start: {err}")
-        rclpy.try_shutdown()
-        return 2
-    try:
-        shutdown.spin_until(node, stop, done=lambda: node.finished)
-        linger = time.monotonic() + 1.0  # let reliable subscribers receive the last messages
-        shutdown.spin_until(node, stop, done=lambda: time.monotonic() > linger)
-    finally:
-        shutdown.close(node)
-    return 0
+    return shutdown.run("simulator", NODE_NAME, lambda: SimulatorNode(params_files=params_files(argv)), argv,
+                        done=lambda node: node.finished, linger=1.0)  # (reliable subscribers get the last messages)
 
 
 if __name__ == "__main__":
