@@ -166,8 +166,8 @@ for _entry in (
                 "gpf", GPF_OPTIONS | MEMBER_OPTIONS, "navigation", node=True, aliases=("gpf-mm", "gpf-ladder"),
                 description="the multiple-model GPF: navigation-grade GPFs (cloud metric, exact weights, "
                             "tempering, the update flattened along the flow) on the nominal model and on a "
-                            "compensated model of 0.1 m/s^2, compensated EKFs of 1e-3, 1e-2 and 0.03 m/s^2, "
-                            "with the nesting gate; the node's default"),
+                            "compensated model of 0.1 m/s^2, compensated EKFs of 1e-3 and 1e-2 m/s^2, "
+                            "with the nesting and size gates; the node's default"),
     FilterEntry("gpf-pair", "GPF navigation, one compensated member",
                 lambda model, n_particles, seed, **options: _gpf(
                     model, n_particles, seed, **{**NAVIGATION_GPF, **options, **ONE_MEMBER}),

@@ -9,10 +9,11 @@ against a compensation sized for the paper's 9 % gravity mismatch, 0.13 m/s^2); 
 cannot be followed. :class:`MultipleModelGPF` tests the hypotheses instead of assuming one: filters run in
 parallel, one on the user's model as it is (``nominal``) and one per compensation scale, with
 ``sigma_j = compensation_scales[j] * unmodelled_acceleration_std`` and correlation time
-``tau_j = compensation_times[j] * unmodelled_acceleration_time``: by default four compensated members, 1e-3, 1e-2,
-0.03 and 0.1 m/s^2 with 2e4, 1e4, 9e4 and 1e6 s, so that a force from 1e-4 to 0.2 m/s^2, constant or
-turning along the orbit, has a member of its size and pace. A Markov chain switches between the ``K``
-models with mean sojourn ``switch_time``, a switch going to each other model alike.
+``tau_j = compensation_times[j] * unmodelled_acceleration_time``: by default three compensated members, 1e-3,
+1e-2 and 0.1 m/s^2 with 2e4, 1e4 and 1e6 s, so that a force from 1e-4 to 0.2 m/s^2, constant or turning
+along the orbit, has a member of its size and pace, or between two members is the wider one's (step 5). A
+Markov chain switches between the ``K`` models with mean sojourn ``switch_time``, a switch going to each
+other model alike.
 
 **Which filter each member is.** The nominal member and the widest compensated one are GPFs: between
 them they carry the estimate wherever the data leave the state far from linear (a large prior, range
@@ -66,12 +67,11 @@ Each cycle is Blom's interacting multiple model (IMM):
 5. **Size gate** (``size_gate`` > 0), in every update: a narrow member whose estimated acceleration lies
    beyond the ``size_gate`` quantile of its own prior (``a^T a / sigma_j^2`` above ``chi^2_p``) gets
    probability 0 for that update, like the nesting gate's refusals. Its estimate says the force is of a
-   wider member's size: with the scales a few times apart, a force beyond about two of a member's sigmas
-   lies well inside the next member's prior. Without the gate a member too small for the force can still
-   win the evidence (it follows the measured part of the force with a shrunk, lagging acceleration) and
-   turn the rest into an error where the data are weakest: a 2 % gravity mismatch without azimuth, where
-   the 1e-2 m/s^2 member, its acceleration at 2.4 of its sigmas, won against the members of the force's
-   size.
+   wider member's size: a force beyond about two of a member's sigmas lies inside the next member's
+   prior. Without the gate a member too small for the force can still win the evidence (it follows the
+   measured part of the force with a shrunk, lagging acceleration) and turn the rest into an error where
+   the data are weakest: a 2 % gravity mismatch (0.03 m/s^2) without azimuth, where the 1e-2 m/s^2
+   member, its acceleration beyond two of its sigmas, won against the widest member.
 
 The estimate is the mixture ``sum_j mu_j N(m_j, P_j)`` (mean and covariance of the user's state); the
 unmodelled acceleration is the mixture of the compensated members' and the nominal model's zero.
@@ -102,20 +102,22 @@ from gpf_nav.models.state_space import StateSpaceModel
 
 SWITCH_TIME = 2.0e5
 """Default mean sojourn time of the model chain, s (switching probability 1e-5 per 2 s step)."""
-COMPENSATION_SCALES = (0.01, 0.1, 0.3, 1.0)
+COMPENSATION_SCALES = (0.01, 0.1, 1.0)
 """Default compensation scales: the compensated members' ``sigma`` as fractions of
-``unmodelled_acceleration_std`` (module docstring): with its default 0.1 m/s^2, members of 1e-3, 1e-2,
-0.03 and 0.1 m/s^2, so that the Moon's J2 (4.6e-4 m/s^2), a thrust of a few mm/s^2, a 2 % gravity
-mismatch (0.03 m/s^2) and the paper's 9 % (0.13 m/s^2) each have a member of their size. Without the
-0.03 m/s^2 member the 1e-2 member wins the evidence against a 0.03 m/s^2 force, three of its standard
-deviations, and its shrunk acceleration becomes an along-track error where azimuth is missing."""
-COMPENSATION_TIMES = (0.02, 0.01, 0.09, 1.0)
+``unmodelled_acceleration_std`` (module docstring): with its default 0.1 m/s^2, members of 1e-3, 1e-2 and
+0.1 m/s^2, so that the Moon's J2 (4.6e-4 m/s^2), a thrust of a few mm/s^2 and the paper's 9 % mismatch
+(0.13 m/s^2) each have a member of their size. A force between two members (a 2 % gravity mismatch, 0.03
+m/s^2) is the wider one's: the size gate (step 5) refuses the narrower one, whose estimate says the force
+is beyond its prior. A member of 0.03 m/s^2 between them, an EKF, won the evidence against that force
+without azimuth, honest but with 1.22 times the widest GPF member's position error (the EKF's
+linearisation across a cloud kilometres wide); as a GPF it would cost a third GPF member."""
+COMPENSATION_TIMES = (0.02, 0.01, 1.0)
 """Default correlation times of the compensated members as fractions of ``unmodelled_acceleration_time``
-(with its default 1e6 s: 2e4, 1e4, 9e4 and 1e6 s). A force of size ``sigma`` changes by about
+(with its default 1e6 s: 2e4, 1e4 and 1e6 s). A force of size ``sigma`` changes by about
 ``sigma sqrt(2 T / tau)`` over a time ``T``: the smallest member follows J2 as it varies along the
 orbit, the 1e-2 one a thrust that turns, the widest one learns a constant mismatch and keeps it. No
 member's acceleration may change faster than the widest member's, ``2 sigma^2 / tau`` (the intensity of
-its driving noise: 1e-10, 2e-8, 2e-8 and 2e-8 m^2/s^5), so that the widest model contains every other in pace
+its driving noise: 1e-10, 2e-8 and 2e-8 m^2/s^5), so that the widest model contains every other in pace
 as well as in size (step 4). A faster member (1e-2 m/s^2 at 2e3 s, five times the widest's pace) is
 wider than the widest along a direction no measurement sees: without azimuth its state wanders there,
 its estimate stays inside the widest member's gate, and it wins the evidence by predicting the next
@@ -129,8 +131,9 @@ SIZE_GATE = 0.8
 """Probability of the size gate (step 5 of the module docstring; 0: no gate): a narrow member whose estimated
 acceleration lies beyond this quantile of its own prior (``a^T a / sigma^2 > chi^2_p``, 2.15 sigmas for
 ``p = 3``) is refused. Members of the force's size keep theirs well inside it (the Moon's J2 at 0.46 of the
-1e-3 m/s^2 member's sigma, a 2 % gravity mismatch at 1 of the 0.03 m/s^2 member's); at 0.99 (3.4 sigmas) the
-gate never fires against a 2 % mismatch, and the 1e-2 m/s^2 member keeps winning there."""
+1e-3 m/s^2 member's sigma, a thrust of 5 mm/s^2 at 0.5 of the 1e-2 m/s^2 member's); at 0.99 (3.4 sigmas) the
+gate never fires against a 2 % gravity mismatch (0.03 m/s^2), and the 1e-2 m/s^2 member, its acceleration
+shrunk and lagging, keeps winning there."""
 NESTING_SPREAD = 0.5
 """Fraction of the nominal member's variance along each undetermined direction below which a narrow
 compensated member is refused by the nesting gate (step 4 of the module docstring). The bound of exact
