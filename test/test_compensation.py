@@ -306,6 +306,8 @@ def test_gated_compensated_ekf_refuses_a_20_sigma_outlier_and_only_it():
     twin.update(np.array([np.nan, y[1], y[2]]))
     plain.update(y)
     assert gated.gated == 1 and plain.gated == 0 and plain.outlier_gate == 0.0
+    # what the refused range could have added to the evidence: its density at the gate's edge (6 sigmas)
+    assert gated.refused_log_likelihood == pytest.approx(-0.5 * (36.0 + np.log(2.0 * np.pi * sigma ** 2)), rel=1e-12)
     assert np.array_equal(gated.augmented_mean, twin.augmented_mean)
     assert np.array_equal(gated.augmented_covariance, twin.augmented_covariance)
     assert np.linalg.norm(plain.mean[:3] - gated.mean[:3]) > 3.0 * sigma

@@ -223,23 +223,25 @@ def test_a_member_the_widest_one_does_not_admit_loses_its_probability_while_a_di
 
 def test_a_member_that_refuses_a_component_takes_the_lowest_evidence_and_the_others_still_weigh():
     """One member's gate refuses a component: the others' evidence still moves the probabilities, and the
-    refusing member is weighed as the least probable of them; when every member refuses, nothing moves."""
+    refusing member is weighed as the least probable of them, or lower when its own evidence with the
+    refused component at its gate's edge is lower; when every member refuses, nothing moves."""
     f = MultipleModelGPF(constant_velocity(), 200, seed=0, unmodelled_acceleration_std=SIGMA,
                          unmodelled_acceleration_time=TAU, compensation_scales=(0.01, 1.0),
                          compensation_times=(1.0, 1.0), nesting_gate=0.0)
     f.initialize(MEAN, COV)
     f.predict(1.0)
 
-    def scripted(member, evidence, refuses):
+    def scripted(member, evidence, refuses, edge):
         def update(y, sensor=None):
             member.last_log_likelihood = evidence
             member.gated += refuses
+            member.refused_log_likelihood = edge
         return update
 
-    def weigh(evidences, refusals):
+    def weigh(evidences, refusals, edge=-20.0):
         prior = f.model_probabilities.copy()
         for member, evidence, refuses in zip(f.members, evidences, refusals):
-            member.update = scripted(member, evidence, refuses)
+            member.update = scripted(member, evidence, refuses, edge)
         f.update(np.array([0.0]))
         return prior, f.model_probabilities
 
@@ -247,6 +249,9 @@ def test_a_member_that_refuses_a_component_takes_the_lowest_evidence_and_the_oth
     expected = prior * np.exp(np.array([0.0, -3.0, -3.0]))
     np.testing.assert_allclose(mu, expected / expected.sum(), rtol=1e-12)
     assert f.last_log_likelihood == pytest.approx(np.log(expected.sum()), rel=1e-12)  # log sum_j c_j p(y | j)
+    prior, mu = weigh((0.0, 5.0, -3.0), (0, 1, 0))  # its used components and the refused one at the edge: -15
+    expected = prior * np.exp(np.array([0.0, -15.0, -3.0]))
+    np.testing.assert_allclose(mu, expected / expected.sum(), rtol=1e-12)
     prior, mu = weigh((0.0, 50.0, -3.0), (1, 1, 1))  # every member refused: the probabilities stay
     np.testing.assert_allclose(mu, prior, rtol=1e-12)
     assert f.last_log_likelihood == 0.0

@@ -66,7 +66,7 @@ class CloudProposal(Proposal):
         ``n`` standard normals ``z`` (in antithetic pairs, :func:`antithetic_normals`), and the exact
         weight's correction ``log N(x; centre, D) - log q(x) = (|z|^2 - |w|^2) / 2 + log det U``.
         """
-        x_pred, y, rows, dt = stage.x, stage.y, stage.rows, stage.dt
+        x_pred, rows, dt = stage.x, stage.rows, stage.dt
         if not rows.any():
             return Move(prior_draw(pf, x_pred, dt)[0], 0.0, rows, None, rows)
         troubled = stage.fraction < 1.0 or any(streak.any() for streak in pf._gate_streaks.values())
@@ -87,7 +87,8 @@ class CloudProposal(Proposal):
         # the co-state S^-1 W r / dt, outliers included (the division folded into the small factor)
         costate = ((L_inv.T / dt if dt > 0.0 else L_inv.T) @ white_r).T
         # the gate judges the whole measurement against the prediction: the first draw only
-        used = pf._gate(wr @ pf._weights, S, rows, pf._sensor.name) if stage.first else rows
+        used = (pf._gate(wr @ pf._weights, S, rows, pf._sensor.name, pf._whitening(rows, stage.fraction)[0])
+                if stage.first else rows)
         if not used.any():  # every component refused: a prediction
             return Move(prior_draw(pf, x_pred, dt)[0], 0.0, used, costate, rows)
         if used is not rows:  # outliers left out (a principal block of a sound S is sound)

@@ -42,10 +42,16 @@ Each cycle is Blom's interacting multiple model (IMM):
    that did
    not weigh the whole measurement (its gate refused a component, or it re-initialised) has no
    evidence comparable with the others': it takes the lowest of theirs, since it found the measurement
-   no more probable than the least of the members that used it. Leaving every probability at ``c``
+   no more probable than the least of the members that used it, and a member whose gate refused takes
+   less when its own evidence with the refused components at its gate's edge is less
+   (:attr:`~gpf_nav.filters.gating.InnovationGated.refused_log_likelihood`: a refused component lies
+   beyond the edge, so that bounds what it would have found). Leaving every probability at ``c``
    instead would let one member that cannot follow the data (the 1e-3 m/s² member under the paper's
-   9 % mismatch refuses a component in a quarter of the updates) stop the others' evidence. When every
-   member refused, ``mu = c``.
+   9 % mismatch refuses a component in a quarter of the updates) stop the others' evidence; the lowest
+   of the users' alone, with one member using a component that the others refuse, ties them with it
+   whatever it found, and narrow members that the data have left (early in a 9 % mismatch, a velocity
+   3.6 m/s off against a velocimeter's 0.1 m/s) keep their probability while they refuse every fix. An
+   outlier that every member refuses still leaves ``mu = c``.
 4. **Nesting gate** (``nesting_gate`` > 0), while the data leave a direction of the user's state
    undetermined (the observability report, :attr:`observability`): the widest member's model contains
    every other's, so its posterior should admit their estimates. A member whose estimate of the user's
@@ -287,12 +293,17 @@ class MultipleModelGPF(Composite):
         before = [(m.gated, m.recoveries) for m in self.members]
         for member in self.members:
             member.update(y, sensor)
-        refused = np.array([(m.gated, m.recoveries) != b for m, b in zip(self.members, before)])
+        gated = np.array([m.gated != b[0] for m, b in zip(self.members, before)])
+        recovered = np.array([m.recoveries != b[1] for m, b in zip(self.members, before)])
+        refused = gated | recovered
         mu = self._predicted_probabilities
         self.last_log_likelihood = 0.0
         if not refused.all():
             evidence = np.array([m.last_log_likelihood for m in self.members])
-            evidence[refused] = evidence[~refused].min()  # (step 3 of the module docstring)
+            # (step 3 of the module docstring)
+            bound = np.array([m.last_log_likelihood + m.refused_log_likelihood if g and not r else math.inf
+                              for m, g, r in zip(self.members, gated, recovered)])
+            evidence[refused] = np.minimum(evidence[~refused].min(), bound[refused])
             peak = evidence.max()
             posterior = mu * np.exp(evidence - peak)
             if np.isfinite(posterior).all() and posterior.sum() > 0.0:  # else the data cannot tell them apart
