@@ -7,6 +7,7 @@ import pytest
 from gpf_nav.estimator.engine import EngineConfig, EstimatorEngine
 from gpf_nav.estimator.factory import make_filter
 from gpf_nav.estimator.history import SNAPSHOT_EVERY
+from gpf_nav.estimator.measurements import InnovationGate
 from gpf_nav.filters import SensorBiasFilter
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 from gpf_nav.sim.sensor_suite import SuiteConfig, generate_suite, suite_sensors
@@ -184,6 +185,41 @@ def test_the_innovation_gate_refuses_an_outlier_then_yields_after_the_limit():
     assert engine.measurement(t + 3 * S, outlier, None, "position", sensors["position"]) == (True, "")
     assert engine.counters.rejected_by_stream[("position", "innovation_gate")] == 2
     assert np.all(np.isfinite(engine.mean))
+
+
+class _Hypotheses:
+    """A filter holding two models at known predicted estimates of a 3-state position."""
+
+    time = 0.0
+
+    def __init__(self, *means):
+        self.means = means
+
+    def predicted_estimates(self, sensor):
+        return [(sensor, np.array(mean, dtype=float), np.eye(3)) for mean in self.means]
+
+
+def test_the_gate_refuses_only_what_no_model_of_the_filter_explains():
+    """A multiple-model filter's hypotheses are tested one by one: a fix 10 sigmas from the first model and
+    at the second passes; 10 sigmas from both, it is refused; and a real multiple-model filter gives every
+    member of positive probability, the most probable first."""
+    gate = InnovationGate(EngineConfig(gates={"position": 0.9999}, gate_limit=5))
+    sensor = PositionSensor(1e-6)
+    far = np.array([10.0, 0.0, 0.0])
+    assert not gate.refuses(_Hypotheses([0.0] * 3, far), "position", sensor, far)
+    assert gate.refuses(_Hypotheses([0.0] * 3, -far), "position", sensor, far)
+    scenario = generate(ScenarioConfig(duration=20.0), 3)
+    flt = make_filter("gpf", filter_model(scenario.config), n_particles=100, seed=5)
+    flt.initialize(scenario.prior_mean, scenario.prior_cov)
+    flt.predict(2.0)
+    flt.update(scenario.measurements[1])
+    estimates = flt.predicted_estimates(sensor)
+    order = np.argsort(-flt.model_probabilities, kind="stable")
+    assert len(estimates) == len(flt.members)
+    for (lifted, mean, cov), j in zip(estimates, order):
+        assert lifted is sensor
+        np.testing.assert_array_equal(mean, flt.members[j].mean)
+        np.testing.assert_array_equal(cov, flt.members[j].covariance)
 
 
 def test_the_gate_of_a_biased_sensor_subtracts_its_estimated_bias():

@@ -3,8 +3,10 @@ its own stamp.
 
 * A stream with a gate (``gates``) is tested on the predicted estimate
   (:func:`gpf_nav.sensors.innovation_distance`, chi-square; with the sensor's estimated bias and its sigma
-  when it has bias states): refused as ``innovation_gate`` (the filter stays predicted to the stamp)
-  unless ``gate_limit`` were refused in a row.
+  when it has bias states), of each model a multiple-model filter holds
+  (:meth:`~gpf_nav.filters.interface.Filter.predicted_estimates`): refused as ``innovation_gate`` (the
+  filter stays predicted to the stamp) when no model admits it, unless ``gate_limit`` were refused in a
+  row.
 * A measurement stamped before the filter's time, by at most ``history_length`` s, is fused at its own
   stamp: the filter is restored from the last snapshot taken before it (:mod:`gpf_nav.estimator.history`),
   the inputs between are re-applied, it is updated with the late input, and the later inputs are
@@ -54,17 +56,17 @@ class InnovationGate:
         self.streaks: dict[str, int] = {}
 
     def refuses(self, flt: Filter, stream: str, sensor: Sensor | None, y: np.ndarray) -> bool:
-        """Whether the gate of ``stream`` (a sensor object's streams only) refuses ``y`` ``(m,)`` on the
+        """Whether the gate of ``stream`` (a sensor object's streams only) refuses ``y`` ``(m,)`` on every
         predicted estimate of ``flt``. Counts the refusals in a row; after ``gate_limit`` the next one
         passes."""
         probability = self.config.gates.get(stream, 0.0)
         if sensor is None or probability <= 0.0:
             return False
-        sensor, mean, cov = flt.predicted_estimate(sensor)  # with the sensor's estimated bias, if any
-        d2, k = innovation_distance(sensor, y, mean, cov, flt.time)
-        if k == 0 or d2 <= _chi2_threshold(probability, k):
-            self.streaks[stream] = 0
-            return False
+        for lifted, mean, cov in flt.predicted_estimates(sensor):  # with the sensor's estimated bias, if any
+            d2, k = innovation_distance(lifted, y, mean, cov, flt.time)
+            if k == 0 or d2 <= _chi2_threshold(probability, k):
+                self.streaks[stream] = 0
+                return False
         streak = self.streaks.get(stream, 0)
         if streak >= self.config.gate_limit:
             self.streaks[stream] = 0

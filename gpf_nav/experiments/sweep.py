@@ -37,7 +37,7 @@ from gpf_nav.experiments.montecarlo import (add_common_arguments, base_config, g
                                             parse_filters,
                                             per_run_values, run_metadata, write_json)
 from gpf_nav.experiments.parallel import map_tasks
-from gpf_nav.experiments.runner import FILTERS, RunTask, run_task, select_oracle
+from gpf_nav.experiments.runner import RunTask, run_task, select_oracle
 from gpf_nav.sim.scenario import ScenarioConfig
 
 SCHEMA = "gpf_nav.sweep/2"

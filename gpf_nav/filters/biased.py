@@ -80,6 +80,10 @@ class SensorBiasFilter(Composite):
         innovation test of ``sensor`` needs, its estimated bias subtracted and its bias sigma counted."""
         return self.bias_model.lift(sensor), self.augmented_mean, self.augmented_covariance
 
+    def predicted_estimates(self, sensor: Sensor) -> list[tuple[Sensor, np.ndarray, np.ndarray]]:
+        """:attr:`filter`'s, of ``sensor`` on the augmented state (:meth:`predicted_estimate`)."""
+        return self.filter.predicted_estimates(self.bias_model.lift(sensor))
+
     @property
     def augmented_mean(self) -> np.ndarray:
         """Mean ``(n + n_b,)`` of the user's state and the biases."""

@@ -144,6 +144,12 @@ class Filter(ABC):
         covariance (n, n))``."""
         return sensor, self.mean, self.covariance
 
+    def predicted_estimates(self, sensor: Sensor) -> list[tuple[Sensor, np.ndarray, np.ndarray]]:
+        """The :meth:`predicted_estimate` of each hypothesis the filter holds, the most probable first: an
+        innovation test should refuse a measurement only when every one refuses it (a measurement that one
+        model explains is not an outlier). One for a single-model filter."""
+        return [self.predicted_estimate(sensor)]
+
     def __init__(self, model: StateSpaceModel, seed: int | np.random.Generator | None = None):
         self.model = model
         self.rng = np.random.default_rng(seed)

@@ -30,7 +30,6 @@ measurement functions and the dynamics can see), not about how far the estimate 
 from __future__ import annotations
 
 import copy
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
