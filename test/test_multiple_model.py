@@ -257,6 +257,35 @@ def test_a_member_that_refuses_a_component_takes_the_lowest_evidence_and_the_oth
     assert f.last_log_likelihood == 0.0
 
 
+def test_the_nominal_model_also_switches_to_the_narrowest_compensated_one():
+    """The chain over dt: p = 1 - exp(-dt / switch_time) spread alike over the other models, and the
+    nominal model's own switch, (1 - p)(1 - exp(-dt / nominal_switch_time)), to the narrowest compensated
+    one; 0 turns that switch off. Equal evidence leaves the probabilities at the chain's prediction."""
+    def predicted(nominal_switch_time, dt=50.0):
+        f = MultipleModelGPF(constant_velocity(), 100, seed=0, unmodelled_acceleration_std=SIGMA,
+                             unmodelled_acceleration_time=TAU, compensation_scales=(0.01, 0.1, 1.0),
+                             compensation_times=(1.0, 1.0, 1.0), switch_time=1e3,
+                             nominal_switch_time=nominal_switch_time, nesting_gate=0.0, size_gate=0.0)
+        f.initialize(MEAN, COV)
+        for member in f.members:
+            member.update = lambda y, sensor=None, member=member: setattr(member, "last_log_likelihood", 0.0)
+        f.predict(1.0)
+        f.update(np.array([0.0]))  # equal evidence: the probabilities stay uniform
+        f.predict(dt)
+        f.update(np.array([0.0]))
+        return f.model_probabilities
+
+    p, q = 1.0 - np.exp(-50.0 / 1e3), 1.0 - np.exp(-50.0 / 400.0)
+    chain = np.full((4, 4), p / 3)
+    np.fill_diagonal(chain, 1.0 - p)
+    np.testing.assert_allclose(predicted(0.0), chain.T @ np.full(4, 0.25), rtol=1e-12)
+    chain[0, 0] -= (1.0 - p) * q
+    chain[0, 1] += (1.0 - p) * q
+    np.testing.assert_allclose(predicted(400.0), chain.T @ np.full(4, 0.25), rtol=1e-12)
+    with pytest.raises(ValueError, match="nominal_switch_time"):
+        MultipleModelGPF(constant_velocity(), nominal_switch_time=-1.0)
+
+
 def test_the_narrow_members_are_gated_compensated_ekfs_unless_asked_for_gpfs():
     """By default the compensated members narrower than the widest are EKFs with the GPF members' gate;
     the nominal and the widest member are GPFs; ``narrow_filter="gpf"`` makes every member a GPF."""
