@@ -34,8 +34,8 @@ Each cycle is Blom's interacting multiple model (IMM):
 
 1. **Mixing**, at the first ``predict`` after an update: with ``mu`` the model probabilities and
    ``p = 1 - exp(-dt / switch_time)`` the switching probability over that ``dt``, ``p_ii = 1 - p`` and
-   ``p_ij = p / (K - 1)``, and ``q = 1 - exp(-dt / nominal_switch_time)`` moved from the nominal model's
-   ``p_00`` to ``p_01`` (the narrowest compensated model), the predicted probabilities are
+   ``p_ij = p / (K - 1)``, and ``q = (1 - p) (1 - exp(-dt / nominal_switch_time))`` moved from the
+   nominal model's ``p_00`` to ``p_01`` (the narrowest compensated model), the predicted probabilities are
    ``c_j = sum_i p_ij mu_i``, and the nominal
    member's cloud is moved (an affine map, :func:`gpf_nav.filters.kernel.match_moments`) to the mean and
    covariance of the mixture ``sum_i mu_{i|0} N(m_i, P_i)``, ``mu_{i|0} = p_i0 mu_i / c_0``. The
@@ -57,9 +57,8 @@ Each cycle is Blom's interacting multiple model (IMM):
    instead would let one member that cannot follow the data (the 1e-3 m/s² member under the paper's
    9 % mismatch refuses a component in a quarter of the updates) stop the others' evidence; the lowest
    of the users' alone, with one member using a component that the others refuse, ties them with it
-   whatever it found, and narrow members that the data have left (early in a 9 % mismatch, a velocity
-   3.6 m/s off against a velocimeter's 0.1 m/s) keep their probability while they refuse every fix. An
-   outlier that every member refuses still leaves ``mu = c``.
+   whatever it found, so members that the data have left would keep their probability while they refuse.
+   An outlier that every member refuses still leaves ``mu = c``.
 4. **Nesting gate** (``nesting_gate`` > 0), while the data leave a direction of the user's state
    undetermined (the observability report, :attr:`observability`): the widest member's model contains
    every other's, so its posterior should admit their estimates. A member whose estimate of the user's
@@ -122,9 +121,9 @@ as the chain's other switches; module docstring). Under the Moon's J2 the share 
 chi-square bound, 10-15 % on two of three campaign seeds with the uniform chain alone, falls to 1-5 %.
 Where the nominal model is right the narrowest member is about as accurate (the point-mass descent, range
 only), except across a long gap in the data: with two surface beacons and 1 400 s between them it carries
-the acceleration it learnt from noise through the gap (205 -> 238 m). A uniform chain as fast
-(``switch_time`` 4e3 s) also keeps the wider members in the mixture and spoils range only, where their
-estimates wander along the unseen rotations (1.1 -> 20.6 km)."""
+the acceleration it learnt from noise through the gap (238 m against 205 m without the switch). A uniform
+chain as fast (``switch_time`` 4e3 s) would also keep the wider members in the mixture and spoil range only,
+where their estimates wander along the unseen rotations (20.6 km against 1.1 km)."""
 COMPENSATION_SCALES = (0.01, 0.1, 1.0)
 """Default compensation scales: the compensated members' ``sigma`` as fractions of
 ``unmodelled_acceleration_std`` (module docstring): with its default 0.1 m/s^2, members of 1e-3, 1e-2 and
