@@ -11,7 +11,8 @@ import pytest
 from gpf_nav.filters import GeometricProjectionPF
 import gpf_nav.filters.flattening as flattening_module
 from gpf_nav.estimator.factory import make_filter
-from gpf_nav.filters.flattening import MOVE_LIMIT, flattening
+from gpf_nav.filters.flattening import FLAT_ENOUGH, MOVE_LIMIT, flattening
+from gpf_nav.kernels.curvature import largest_scaled
 from gpf_nav.models import LinearGaussianModel
 from gpf_nav.sensors.model import ModelSensor
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate, undetermined_subspace
@@ -121,6 +122,23 @@ def test_the_flattened_coordinates_make_the_ranges_now_and_ahead_linear(lags):
     linear = [flat.measured[0] + (xi.T - flat.mean) @ flat.jacobian[0]]
     linear += [measured[0] + (xi.T - flat.mean) @ jacobian[0] for measured, jacobian in flat.ahead]
     np.testing.assert_allclose(_ranges(model, back, lags), np.column_stack(linear), rtol=0, atol=0.05)
+
+
+def test_a_cloud_that_curves_by_less_than_flat_enough_is_left_in_the_state_coordinates():
+    """The 20 km range-only cloud curves by many noise deviations; shrunk about its mean its largest
+    curvature falls as the square of the scale. Just under FLAT_ENOUGH the cloud is left as it is (None),
+    just over it the cloud is flattened."""
+    _, model, x, weights = _range_only_cloud()
+    rows = np.array([True, False, False])
+    lags = (50.0, 100.0)
+    flat, _ = flattening(x, weights, rows, ModelSensor(model), model, 0.0, None, lags, model.state_dim)
+    curvature = largest_scaled(flat.curvature(x), np.zeros((0, 0)), flat.noise_std)
+    assert curvature > 100 * FLAT_ENOUGH
+    mean = (x @ weights)[:, None]
+    for factor, flattened in ((0.9, False), (1.1, True)):
+        shrunk = np.ascontiguousarray(mean + np.sqrt(factor * FLAT_ENOUGH / curvature) * (x - mean))
+        result = flattening(shrunk, weights, rows, ModelSensor(model), model, 0.0, None, lags, model.state_dim)
+        assert (result is not None) == flattened, factor
 
 
 def test_a_straight_draw_in_the_flow_flattened_coordinates_keeps_the_ranges_ahead():

@@ -38,9 +38,18 @@ from gpf_nav.sensors.sensor import Sensor
 
 ITERATIONS = 3
 """Most fixed-point steps of the map back (:meth:`Flattening.unflatten`)."""
+FLAT_ENOUGH = 1e-2
+"""Curvature, in measurement noise standard deviations, below which the cloud is left in the state's
+coordinates (:func:`flattening`): at every particle the measured rows, now and ahead, are then their
+linearisation at the mean to 1 % of the noise, and the likelihood of a particle three deviations out is
+off by 3 %, below the Monte Carlo error of the weights at a few hundred particles. The update's own
+linearisation is corrected by its exact weights; what flattening adds, the kernel's straight draws kept
+on the measurement's shells, matters for clouds kilometres wide (a large prior, range only), whose
+curvature is tenths of the noise and more. A cloud tracking the lunar descent in steady state curves by
+3e-3 to 2e-2 of the noise: most updates skip the flattening and its map back."""
 NEGLIGIBLE = 1e-3
-"""Curvature (in measurement noise standard deviations) below which the cloud is left in the state's
-coordinates (:func:`flattening`), and changes of it below which the map back has converged."""
+"""Changes of the curvature, in measurement noise standard deviations, below which the map back has
+converged (:meth:`Flattening.unflatten`)."""
 RANK_TOLERANCE = 1e-8
 """Singular values of the noise-whitened rows ahead below this fraction of the largest are dropped."""
 MOVE_LIMIT = 100.0
@@ -123,32 +132,40 @@ def flattening(x: np.ndarray, weights: np.ndarray, rows: np.ndarray, sensor: Sen
     """The flattened coordinates of the cloud ``x`` ``(n, N)`` with normalised ``weights`` ``(N,)`` for the
     measured ``rows`` ``(m,)`` of ``sensor`` at ``time``, flowed by ``model`` with the input ``u`` held to
     the increasing ``lags`` (s; none: the rows measured now only), moving the first ``user_dim``
-    components of the state only, and the cloud in them, ``xi`` ``(n, N)``. None when the rows measured now
-    are not of full rank at the mean, anything is non-finite, or every particle's curvature is below
-    :data:`NEGLIGIBLE` (the coordinates are then the state's own, to that accuracy)."""
+    components of the state only, and the cloud in them, ``xi`` ``(n, N)``. None when every particle's
+    curvature is below :data:`FLAT_ENOUGH` (the coordinates are then the state's own, to that accuracy),
+    the rows measured now are not of full rank at the mean, or anything is non-finite. The curvature is
+    tested before the gain is built: a cloud left as it is pays for one evaluation of it."""
     mean = np.einsum("in,n->i", x, weights)
     h, H = sensor.measure_and_jacobian(mean[None], time)
     h, H = h[0], H[0]
+    n = x.shape[0]
+    k = int(rows.sum())
+    noise_std = np.concatenate([np.sqrt(np.diag(sensor.noise(time))[rows])] * (1 + len(lags)))
+    steps = tuple(float(later) - float(earlier) for earlier, later in zip((0.0, *lags), lags))
+    ahead = []
+    flowed, t, F = mean[None], time, np.eye(n)
+    for step in steps:
+        F = model.transition_jacobian(flowed, step, t, u)[0] @ F
+        flowed = model.transition(flowed, step, t, u)
+        t += step
+        measured, jacobian = sensor.measure_and_jacobian(flowed, t)
+        ahead.append((measured[0], jacobian[0] @ F))
+    arrays = (h, H, *(a for pair in ahead for a in pair))
+    if not np.isfinite(np.concatenate([a.ravel() for a in arrays])).all():
+        return None
+    gain = np.zeros((n, k * (1 + len(lags))))  # (written below, once the cloud is known to need it)
+    flat = Flattening(mean, h, H, rows, gain, noise_std, steps, tuple(ahead), float(time), sensor, model, u)
+    nu = flat.curvature(x)
+    if not largest_scaled(nu, _NONE, noise_std) >= FLAT_ENOUGH:  # (NaN: nothing to flatten with)
+        return None
     now = H[rows][:, :user_dim]  # (k, n_user)
     try:
         first = np.linalg.solve(now @ now.T, now).T  # (n_user, k): J_0^+ on the user's state
     except np.linalg.LinAlgError:
         return None
-    n = x.shape[0]
-    k = int(rows.sum())
-    gain = np.zeros((n, k * (1 + len(lags))))
-    noise_std = np.concatenate([np.sqrt(np.diag(sensor.noise(time))[rows])] * (1 + len(lags)))
     gain[:user_dim, :k] = first
-    steps = tuple(float(later) - float(earlier) for earlier, later in zip((0.0, *lags), lags))
-    ahead = []
     if lags:
-        flowed, t, F = mean[None], time, np.eye(n)
-        for step in steps:
-            F = model.transition_jacobian(flowed, step, t, u)[0] @ F
-            flowed = model.transition(flowed, step, t, u)
-            t += step
-            measured, jacobian = sensor.measure_and_jacobian(flowed, t)
-            ahead.append((measured[0], jacobian[0] @ F))
         later = np.vstack([jacobian[rows] for _, jacobian in ahead])[:, :user_dim]  # (k L, n_user)
         # the rows ahead within the null space of the rows now: K = [J_0^+ - A^+ J_L J_0^+, A^+]
         A = (later - (later @ first) @ now) / noise_std[k:, None]
@@ -156,12 +173,7 @@ def flattening(x: np.ndarray, weights: np.ndarray, rows: np.ndarray, sensor: Sen
         keep = s > RANK_TOLERANCE * s[0] if s.size and s[0] > 0.0 else np.zeros(s.size, bool)
         ahead_gain = _AheadGain(first, later @ first, U, s, Vt, noise_std[k:])
         ahead_gain.write(gain, keep)
-    arrays = (h, H, gain, *(a for pair in ahead for a in pair))
-    if not np.isfinite(np.concatenate([a.ravel() for a in arrays])).all():
-        return None
-    flat = Flattening(mean, h, H, rows, gain, noise_std, steps, tuple(ahead), float(time), sensor, model, u)
-    nu = flat.curvature(x)
-    if not largest_scaled(nu, _NONE, noise_std) >= NEGLIGIBLE:  # (NaN: nothing to flatten with)
+    if not np.isfinite(gain).all():
         return None
     moves = gain @ nu.T  # (n, N)
     if lags and keep.any():
