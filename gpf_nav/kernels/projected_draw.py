@@ -86,12 +86,12 @@ def _draw_parallel(C, U, Bt, centres, white_r, z, log_det, pair, correction):
 def projected_draw(C: np.ndarray, U: np.ndarray, Bt: np.ndarray, centres: np.ndarray, white_r: np.ndarray,
                    z: np.ndarray, log_det: float) -> tuple[np.ndarray, np.ndarray]:
     """The proposal drawn in the kernel's whitened coordinates and mapped to the state's
-    (:meth:`~gpf_nav.filters.cloud_proposal.CloudProposal.draw`), for the kernel's factor ``C`` ``(n, n)``, the proposal's factor ``U`` ``(n, n)``, the
-    gain ``B^T`` ``(n, k)``, the kernel ``centres`` ``(n, N)``, the whitened innovations ``white_r`` ``(k, N)``
-    and the standard normals ``z`` ``(n, N)`` (all C-contiguous): with ``m = B^T white_r`` and ``w = U z + m``,
-    ``([C m + centres; C w + centres] (2 n, N), (|z|^2 - |w|^2) / 2 - log_det (N,))``, the proposal means
-    and the draws stacked, and the weights' correction. On every core from
-    :data:`~gpf_nav.kernels.PARALLEL` particles."""
+    (:meth:`~gpf_nav.filters.cloud_proposal.CloudProposal.draw`), for the kernel's factor ``C`` ``(n, n)``,
+    the proposal's factor ``U`` ``(n, n)``, the gain ``B^T`` ``(n, k)``, the kernel ``centres`` ``(n, N)``, the
+    whitened innovations ``white_r`` ``(k, N)`` and the standard normals ``z`` ``(n, N)`` (all C-contiguous):
+    with ``m = B^T white_r`` and ``w = U z + m``, ``([C m + centres; C w + centres] (2 n, N), (|z|^2 - |w|^2)
+    / 2 - log_det (N,))``, the proposal means and the draws stacked, and the weights' correction. On every
+    core from :data:`~gpf_nav.kernels.PARALLEL` particles."""
     n, count = z.shape
     pair, correction = np.empty((2 * n, count)), np.empty(count)
     kernel = _draw_parallel if count >= PARALLEL else _draw_serial
