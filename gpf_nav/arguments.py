@@ -1,5 +1,5 @@
 """Argument parsing shared by every command: a parser whose error is one line and exit status 2, and
-the argparse types for positive numbers."""
+the argparse types for positive and non-negative numbers."""
 from __future__ import annotations
 
 import argparse
@@ -23,6 +23,17 @@ def positive_int(text: str) -> int:
         value = 0
     if value < 1:
         raise argparse.ArgumentTypeError(f"{text!r} is not a positive integer")
+    return value
+
+
+def non_negative_int(text: str) -> int:
+    """argparse type: an integer >= 0."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a non-negative integer")
     return value
 
 

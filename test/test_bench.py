@@ -11,8 +11,9 @@ from gpf_nav.experiments import bench, peer_particles
 
 
 def test_bench_reports_every_filter_and_the_ratio_of_the_same_run(capsys):
-    assert cli.main(["bench", "--json", "--particles", "200", "--repeats", "1"]) == 0
+    assert cli.main(["bench", "--json", "--particles", "200", "--repeats", "1", "--warmup", "5"]) == 0
     report = json.loads(capsys.readouterr().out)
+    assert report["warmup"] == 5
     names = [(r["filter"], r["particles"]) for r in report["results"]]
     peer = [("particles", 200)] if peer_particles.available() else []  # the peer row when installed
     assert names == [("gpf", 200), ("gpf-paper", 200), ("gpf-single", 200), ("spf", 200), *peer, ("ekf", None),
@@ -36,7 +37,7 @@ def test_bench_reports_every_filter_and_the_ratio_of_the_same_run(capsys):
     expected = "retain_freed_memory" if allocator.retained else "default"
     assert report["machine"]["allocator"] == expected
     text = bench.format_table(report)
-    assert "GPF/SPF: N=200:" in text and "GPF/GPF-paper: N=200:" in text and f"allocator: {expected}" in text
+    assert "after 5 steps" in text and "GPF/SPF: N=200:" in text and "GPF/GPF-paper: N=200:" in text and f"allocator: {expected}" in text
     assert report["machine"]["omp_wait_policy"] == os.environ.get("OMP_WAIT_POLICY", "default")
     if peer:
         assert "SPF/particles: N=200:" in text and "GPF-paper/particles: N=200:" in text
@@ -79,6 +80,10 @@ def test_bench_steps_follow_the_measurements_in_order():
     with pytest.raises(ValueError, match="measurements"):
         bench.time_filter(lambda m, seed: GeometricProjectionPF(m, 200, seed=seed), scenario, model,
                           steps=10, repeats=3)
+    later = []  # after a longer warm-up the blocks start further along the descent
+    bench.time_filter(lambda m, seed: later.append(GeometricProjectionPF(m, 200, seed=seed)) or later[-1],
+                      scenario, model, steps=10, repeats=1, warmup=bench.WARMUP + 10)
+    assert later[0].time == pytest.approx(made[0].time)
 
 
 class _Recorder:

@@ -29,6 +29,7 @@ BAD = [
     (["sweep", "--param", "mismatch", "--values", "a,b"], "--values must be comma-separated numbers"),
     (["sweep", "--param", "noise", "--particles", "-1"], "--particles: '-1' is not a positive integer"),
     (["integrity", "--runs", "0"], "--runs: '0' is not a positive integer"),
+    (["bench", "--warmup", "-1"], "--warmup: '-1' is not a non-negative integer"),
     (["integrity", "--variants", "XYZ"], "--variants must be a comma list"),
     (["integrity", "--false-alarm-rate", "2"], "false_alarm_rate"),
     (["integrity", "--range-biases", "x"], "must be comma-separated numbers"),

@@ -12,7 +12,10 @@ filters and the EnKF) run their blocks in turn, round after round, the order rot
 machine whose speed drifts (other work, CPU frequency) moves every filter of the group alike. The
 reported figure is a filter's median block time per step over ``--repeats`` rounds, after a warm-up; the
 ratios (:data:`RATIOS`: GPF/SPF, GPF/GPF-paper, GPF/particles, SPF/particles, GPF-paper/particles) are the
-medians over the rounds of the ratio of the two blocks of a round. ``gpf-nav bench`` runs with the heap
+medians over the rounds of the ratio of the two blocks of a round. The warm-up is :data:`WARMUP` steps: the
+blocks then time the descent's first minutes, where the navigation-grade GPF's clouds are wide enough to be
+flattened at most updates; ``--warmup 300`` times the steady state that follows, where most updates skip
+it (``docs/filters.md``). ``gpf-nav bench`` runs with the heap
 tuning of :mod:`gpf_nav.allocator` and OpenMP's passive waits (:mod:`gpf_nav.openmp`; the report says
 whether each was applied); ``python -m gpf_nav.experiments.bench`` runs with the C library's default
 allocator and OpenMP's default policy, for comparison. ``--node`` runs the ROS node-latency benchmark instead (``gpf_nav.tools.latency``).
@@ -28,7 +31,7 @@ from dataclasses import replace
 import numpy as np
 
 from gpf_nav import allocator, registry
-from gpf_nav.arguments import CommandParser, positive_int
+from gpf_nav.arguments import CommandParser, non_negative_int, positive_int
 from gpf_nav.experiments import peer_particles
 from gpf_nav.experiments.peer_particles import ParticlesBootstrap
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
@@ -116,20 +119,21 @@ def time_filter(make, scenario, model, steps: int, repeats: int, warmup: int = W
     return float(np.median(time_filters([make], scenario, model, steps, repeats, warmup)[0]))
 
 
-def run(particle_counts=PARTICLE_COUNTS, repeats: int = 15, seed: int = 0, filters=FILTERS) -> dict:
-    """Benchmark ``filters`` (registry names); returns ``{"results": [{"filter", "particles", "us_per_step", "blocks_us"
-    (per round)}, ...], "gpf_over_spf": {N: ratio}, ... (one key per :data:`RATIOS` entry, each empty
-    unless both of its filters ran: those against ``particles`` without that library), "machine": ...}``
-    (module docstring)."""
+def run(particle_counts=PARTICLE_COUNTS, repeats: int = 15, seed: int = 0, filters=FILTERS,
+        warmup: int = WARMUP) -> dict:
+    """Benchmark ``filters`` (registry names) after ``warmup`` untimed steps; returns ``{"results":
+    [{"filter", "particles", "us_per_step", "blocks_us" (per round)}, ...], "gpf_over_spf": {N: ratio}, ...
+    (one key per :data:`RATIOS` entry, each empty unless both of its filters ran: those against
+    ``particles`` without that library), "warmup": steps, "machine": ...}`` (module docstring)."""
     default = ScenarioConfig()
-    config = replace(default, duration=default.dt * (WARMUP + repeats * STEPS + 1))
+    config = replace(default, duration=default.dt * (warmup + repeats * STEPS + 1))
     scenario = generate(config, seed)
     model = filter_model(config)
     results, ratios = [], {key: {} for key, _, _ in RATIOS}
     for group in _groups(particle_counts, filters):
         n = max(count or 0 for _, count, _ in group)
         steps = STEPS if n <= 10_000 else 5 if n < LARGE else LARGE_STEPS
-        blocks = time_filters([make for _, _, make in group], scenario, model, steps, repeats)
+        blocks = time_filters([make for _, _, make in group], scenario, model, steps, repeats, warmup)
         for (name, count, _), times in zip(group, blocks):
             results.append({"filter": name, "particles": count, "us_per_step": float(np.median(times)) * 1e6,
                             "blocks_us": [t * 1e6 for t in times]})
@@ -138,7 +142,7 @@ def run(particle_counts=PARTICLE_COUNTS, repeats: int = 15, seed: int = 0, filte
             for key, numerator, denominator in RATIOS:
                 if numerator in by_name and denominator in by_name:
                     ratios[key][str(n)] = float(np.median(by_name[numerator] / by_name[denominator]))
-    return {"results": results, **ratios,
+    return {"results": results, **ratios, "warmup": warmup,
             "machine": {"python": platform.python_version(), "numpy": np.__version__,
                         "processor": platform.machine(),
                         "allocator": "retain_freed_memory" if allocator.retained else "default",
@@ -156,7 +160,7 @@ def format_table(report: dict) -> str:
         us = r["us_per_step"]
         shown = f"{us:9.1f} us" if us < 1000 else f"{us / 1000:9.2f} ms"
         lines.append(f"{r['filter']:<10} {n:>8} {shown:>12}")
-    lines.append("ratios (medians over rounds of blocks timed in turn):")
+    lines.append(f"ratios (medians over rounds of blocks timed in turn, after {report['warmup']} steps):")
     for key, numerator, denominator in RATIOS:
         if report.get(key):
             lines.append(f"{_LABELS[numerator]}/{_LABELS[denominator]}: "
@@ -177,6 +181,9 @@ def main(argv: list[str] | None = None) -> int:
                         help=f"also N = {LARGE:,} (blocks of {LARGE_STEPS} steps)".replace(",", " "))
     parser.add_argument("--repeats", type=positive_int, default=15,
                         help="rounds of timed blocks (medians taken; default 15)")
+    parser.add_argument("--warmup", type=non_negative_int, default=WARMUP,
+                        help=f"untimed steps before the first block (default {WARMUP}: the first minutes; "
+                             "300: the steady state)")
     parser.add_argument("--node", action="store_true",
                         help="run the ROS node-latency benchmark instead (arguments after -- go to it)")
     args, rest = parser.parse_known_args(argv)
@@ -190,7 +197,8 @@ def main(argv: list[str] | None = None) -> int:
                         for name in args.filters.split(",") if name.strip())
     except ValueError as err:
         parser.error(str(err))
-    report = run(tuple(args.particles) + ((LARGE,) if args.large else ()), args.repeats, filters=filters)
+    report = run(tuple(args.particles) + ((LARGE,) if args.large else ()), args.repeats, filters=filters,
+                 warmup=args.warmup)
     print(json.dumps(report, indent=2) if args.json else format_table(report))
     return 0
 
