@@ -46,7 +46,7 @@ off by 3 %, below the Monte Carlo error of the weights at a few hundred particle
 linearisation is corrected by its exact weights; what flattening adds, the kernel's straight draws kept
 on the measurement's shells, matters for clouds kilometres wide (a large prior, range only), whose
 curvature is tenths of the noise and more. A cloud tracking the lunar descent in steady state curves by
-3e-3 to 2e-2 of the noise: most updates skip the flattening and its map back."""
+3e-3 to 3e-2 of the noise: most updates skip the flattening and its map back."""
 NEGLIGIBLE = 1e-3
 """Changes of the curvature, in measurement noise standard deviations, below which the map back has
 converged (:meth:`Flattening.unflatten`)."""
