@@ -270,19 +270,3 @@ def orthogonal_projection(H, r, w, regularization, columns):
     shift = np.zeros((H.shape[2], H.shape[0]))
     shift[columns] = np.einsum("icn,in->cn", Hw, a * w[:, None])
     return shift, a.T
-
-
-def projected_draw(C, U, Bt, centres, white_r, z, log_det):
-    """The cloud proposal's draw as its products made it: ``([C m + centres; C w + centres], correction)``."""
-    m = Bt @ white_r
-    w = U @ z
-    w += m
-    pair = np.empty((2 * z.shape[0], z.shape[1]))
-    np.matmul(C, m, out=pair[:z.shape[0]])
-    np.matmul(C, w, out=pair[z.shape[0]:])
-    pair += np.vstack([centres, centres])
-    correction = np.einsum("kn,kn->n", z, z)
-    correction -= np.einsum("kn,kn->n", w, w)
-    correction *= 0.5
-    correction -= log_det
-    return pair, correction

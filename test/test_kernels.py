@@ -20,7 +20,6 @@ from gpf_nav.linalg import positive_definite
 from gpf_nav.kernels import (VECTOR_MATH, bearing, cloud, covariance, diagonal_projection, information, log_weights,
                              orbit)
 from gpf_nav.kernels import curvature as curvature_kernels
-from gpf_nav.kernels import projected_draw as draw_kernels
 from gpf_nav.kernels.curvature import departure, largest_scaled
 from gpf_nav.kernels.systematic import systematic_ancestors
 from gpf_nav.models.compensation import ModelErrorCompensation
@@ -353,29 +352,6 @@ def test_the_flattening_departures_are_the_numpy_ones(count):
         parallel = np.empty((count, 3))
         curvature_kernels._departure_parallel(residual, x, mean, jacobian, parallel, 0)
         np.testing.assert_array_equal(parallel, serial)
-
-
-@pytest.mark.parametrize("count", SIZES)
-def test_the_projected_draw_is_the_numpy_products(count):
-    """The cloud proposal's means, draws and weight correction in one pass: the products' numbers (to
-    rounding; bit for bit where BLAS's products are chains of fused multiply-adds), serial and parallel
-    loops alike bit for bit."""
-    rng = np.random.default_rng(120 + count)
-    n, k = 9, 3
-    C = np.asfortranarray(np.tril(rng.standard_normal((n, n))) * rng.uniform(1.0, 1e3, (n, 1)))
-    U = np.tril(rng.standard_normal((n, n))).T
-    Bt = rng.standard_normal((k, n)).T
-    centres, _ = _cloud(rng, n, count)
-    white_r, z = rng.standard_normal((k, count)), rng.standard_normal((n, count))
-    arrays = [np.ascontiguousarray(a) for a in (C, U, Bt)] + [centres, white_r, z]
-    pair, correction = draw_kernels.projected_draw(*arrays, 0.37)
-    expected_pair, expected_correction = reference.projected_draw(C, U, Bt, centres, white_r, z, 0.37)
-    _close(pair, expected_pair, atol=1e-12 * np.abs(expected_pair).max())
-    _close(correction, expected_correction, atol=1e-12 * np.abs(expected_correction).max())
-    parallel = np.empty_like(pair), np.empty_like(correction)
-    draw_kernels._draw_parallel(*arrays, 0.37, *parallel)
-    np.testing.assert_array_equal(parallel[0], pair)
-    np.testing.assert_array_equal(parallel[1], correction)
 
 
 class _WithoutFastPath(LunarDescentModel):

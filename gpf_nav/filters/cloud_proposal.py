@@ -24,7 +24,6 @@ from gpf_nav.filters.flattening import Flattening, flattening
 from gpf_nav.filters.kernel import ProposalMixture, shrink
 from gpf_nav.filters.normal_draws import NormalDraws
 from gpf_nav.filters.proposal import Move, Proposal, Stage, prior_draw
-from gpf_nav.kernels.projected_draw import projected_draw
 from gpf_nav.linalg import cholesky_or_none, triangular_inverse
 
 if TYPE_CHECKING:
@@ -105,19 +104,27 @@ class CloudProposal(Proposal):
         R = cholesky_or_none(M, symmetric=True)  # never None: M >= I, and the check of S bounds G G^T / eps
         U = triangular_inverse(R).T  # (n, n)
         z = antithetic_normals(pf.normal_draws, n, pf.n_particles)
-        # [proposal means; x] = [C m; C w] + centres with m = B^T L^-1 W r and w = m + U z, and the exact
-        # weight's correction log N(x; centre, D) - log q(x) = (|z|^2 - |w|^2) / 2 + log det U (x - centre =
-        # C w, x - proposal mean = C U z), in one pass; the pair is weighed together after the update
-        log_det = sum(map(math.log, R.diagonal().tolist()))  # log det R = -log det U
-        pair, correction = projected_draw(np.ascontiguousarray(C), np.ascontiguousarray(U),
-                                          np.ascontiguousarray(B.T), centres, white_r, z, log_det)
-        x = pair[n:]
+        m = B.T @ white_r  # (n, N)
+        w = U @ z
+        w += m
+        pair = np.empty((2 * n, pf.n_particles))  # [proposal means; x]: weighed together after the update
+        proposal_means = np.matmul(C, m, out=pair[:n])
+        proposal_means += centres
+        x = np.matmul(C, w, out=pair[n:])
+        x += centres
         mixture = None
         if self.moment_matching:
             spread = C @ U  # (I - K H) D = C U (C U)^T
             mixture = ProposalMixture(pair, spread @ spread.T)
         if self.weighting == "likelihood":
             correction = 0.0
+        else:
+            # log N(x; centre, D) - log q(x) = (|z|^2 - |w|^2) / 2 + log det U (x - centre = C w, and
+            # x - proposal mean = C U z)
+            correction = np.einsum("kn,kn->n", z, z)
+            correction -= np.einsum("kn,kn->n", w, w)
+            correction *= 0.5
+            correction -= sum(map(math.log, R.diagonal().tolist()))  # log det U
         return Move(x, correction, used, costate, rows, mixture)
 
     def _linearise(self, pf: GeometricProjectionPF, stage: Stage, mean: np.ndarray, centres: np.ndarray

@@ -15,10 +15,8 @@ What makes them fast: loops over a block of :data:`CHUNK` particles that vectori
 (inlined together with a branchy loop, a loop stays scalar), rows indexed through views (an index
 ``start + t`` gets numba's negative-index check, which keeps loops scalar), no sum of floats or
 short-circuit across particles; the lunar flow runs each sub-step over the whole block rather than
-particle by particle. A lone product of a small matrix with the whole cloud (the moment map) stays a BLAS
-call, which a loop does not beat; a chain of them with the sums that follow (the GPF's proposal draw,
-:mod:`~gpf_nav.kernels.projected_draw`) is one pass, whose block stays in the caches while the products'
-temporaries do not. The per-particle kernels run on every core from
+particle by particle. The products of a small matrix with the whole cloud (the GPF's proposal draw, the
+moment map) stay BLAS calls, which a loop does not beat. The per-particle kernels run on every core from
 :data:`PARALLEL` particles, with the serial loop's arithmetic (bit for bit); below it, on a machine
 busy with other processes, the threads cost more than they save. The moments stay serial at every N:
 threads do not make them faster.
