@@ -57,3 +57,14 @@ def test_latency_benchmark_small(private_domain):
     # the IMU samples sent before each measurement reached the estimator (its diagnostics count them)
     assert rows[0]["imu_per_measurement"] == 2 and 0 < rows[0]["imu_accepted"] <= 2 * (5 + 30)
     assert 0 <= rows[0]["late_imu_applied"] <= rows[0]["imu_accepted"]
+
+
+def test_first_odometry_after_a_no_argument_start(private_domain):
+    """The estimator and the simulator started as ``ros2 run`` starts them, with no parameters: the first
+    odometry arrives (its time is a figure for docs/filters.md, not a limit)."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    result = subprocess.run([sys.executable, "-m", "gpf_nav.tools.first_odometry", "--timeout", "200", "--json"],
+                            env=env, capture_output=True, text=True, timeout=260)
+    assert result.returncode == 0, result.stderr[-3000:] + result.stdout
+    report = json.loads(result.stdout)
+    assert 0.0 < report["first_odometry_s"] < report["timeout_s"] == 200.0
