@@ -381,6 +381,30 @@ def test_the_rebuild_gives_the_numbers_of_its_calls_one_at_a_time(kind):
     assert np.array_equal(tracker._free, free) and np.array_equal(tracker._data, data)
 
 
+def test_the_reference_moves_only_to_a_mean_that_explains_the_measurement():
+    """A measurement far beyond the no-data prediction from the reference moves the reference to the filter's
+    mean when the mean explains it; when the mean does not either (a gross outlier, a diverged filter) the
+    reference stays, and the measurement's information is still counted (a diverged bootstrap filter would
+    otherwise rebuild the whole log at every update)."""
+    model = hidden_constant_model()
+    sensor = ModelSensor(model)
+    tracker = ObservabilityTracker(model)
+    tracker.reset(PRIOR_MEAN, PRIOR_COV)
+    rows = np.ones(1, bool)
+    t = 0.0
+    for _ in range(10):
+        tracker.predict(DT, t)
+        t += DT
+        tracker.update(sensor, sensor.measure(tracker.reference[None], t)[0], rows, t, tracker.reference)
+    far = sensor.measure(tracker.reference[None], t)[0] + 1e4  # ~1000 no-data standard deviations
+    tracker.update(sensor, far, rows, t, tracker.reference)  # the filter's mean is no nearer
+    assert tracker.reanchors == 0 and tracker.updates == 11
+    explained = tracker.reference + np.array([1e4, 0.0, 0.0])
+    tracker.update(sensor, far, rows, t, explained)
+    assert tracker.reanchors == 1 and tracker.updates == 12
+    np.testing.assert_allclose(tracker.reference, explained)
+
+
 def test_the_rebuild_cost_tool_times_a_full_log():
     from gpf_nav.tools import rebuild_cost
     row = rebuild_cost.measure("ekf-comp", 30, repeats=1)

@@ -41,7 +41,7 @@ UNDETERMINED_INFORMATION = 0.01
 the prior's (scaled units), is undetermined."""
 REANCHOR_SIGMAS = 10.0
 """A measurement this many standard deviations of the no-data prediction from the reference's moves the
-reference to the filter's mean."""
+reference to the filter's mean, if it is within as many of the mean's."""
 REBUILD_LOG = 20_000
 """Predictions and updates since the prior that the tracker keeps to rebuild its recursions along a new
 reference (:meth:`ObservabilityTracker.reanchor`); past it a move keeps what was accumulated."""
@@ -103,7 +103,10 @@ class ObservabilityTracker:
     estimate Jacobians and observability-constrained EKFs correct in visual-inertial navigation). A
     reference that only flows keeps the null directions of a symmetry exactly. It is moved to the
     filter's mean (:meth:`reanchor`) when the data say it has left the prior's reach (a measurement more
-    than :data:`REANCHOR_SIGMAS` standard deviations of the no-data prediction away), or is not finite.
+    than :data:`REANCHOR_SIGMAS` standard deviations of the no-data prediction away) and the mean has not
+    (the same measurement within that reach of the mean's), or is not finite. A mean that does not explain
+    the measurement either (a diverged filter, a gross outlier) is no better a point to linearise at, and a
+    diverged filter would move the reference at every update.
     The move rebuilds both recursions from the prior along the model's trajectory through the new
     reference (carried back through the logged predictions): a reference that jumped would turn the
     carried information against the new Jacobians, like a moving mean, and give information to a
@@ -114,8 +117,7 @@ class ObservabilityTracker:
     :attr:`reference`, the counters), :meth:`reanchor` or :meth:`reset` first runs the queue in order, the
     same arithmetic on the same numbers as at the calls, and so does a queue of :data:`QUEUE_LIMIT` calls.
     A filter whose update does not read the tracker (no observability constraint) pays for it only when
-    its report is asked for: a bootstrap filter whose diverged estimate moves the reference at every
-    update would otherwise rebuild the whole log at every step.
+    its report is asked for.
 
     Args:
         model: the filter's state-space model (its own state: augmented, if the filter augments it).
@@ -323,8 +325,9 @@ class ObservabilityTracker:
         if outcome == information.NOT_FINITE:
             return
         if outcome == information.FAR:
-            self._reanchor(mean)
-            H = _matrix(sensor.jacobian(self._reference[None], t)[0][rows])
+            if self._explains(sensor, y, rows, t, mean, R):
+                self._reanchor(mean)
+                H = _matrix(sensor.jacobian(self._reference[None], t)[0][rows])
             outcome, data = information.update(H, R, _EMPTY, self._free, self._data, 0.0)
         if outcome != information.UPDATED:  # a singular innovation covariance
             return
@@ -332,6 +335,20 @@ class ObservabilityTracker:
         self._data = data  # Joseph form
         self._updates += 1
         self._report = None
+
+    def _explains(self, sensor, y: np.ndarray, rows: np.ndarray, t: float, mean: np.ndarray,
+                  noise: np.ndarray) -> bool:
+        """Whether the filter's ``mean`` ``(n,)`` is within the no-data prediction's reach of the measured
+        ``rows`` of ``y`` (the test the reference failed): only then is it a better point to linearise at.
+        A filter that does not explain the measurement either (a diverged estimate, a gross outlier) would
+        move the reference at every update, each move a rebuild of the whole log."""
+        if not np.isfinite(mean).all():
+            return False
+        h, H = sensor.measure_and_jacobian(mean[None], t)
+        r = sensor.residual(y, h[0])[rows]
+        outcome, _ = information.update(_matrix(H[0][rows]), noise, _matrix(r), self._free, self._data,
+                                        REANCHOR_SIGMAS ** 2)
+        return outcome != information.FAR and outcome != information.NOT_FINITE
 
     def report(self) -> ObservabilityReport | None:
         """The report now (None before :meth:`reset`, or when a recursion has broken down)."""
