@@ -43,7 +43,7 @@ class ModelErrorCompensated:
             raise ValueError(f"nominal_prior must lie in [0, 1), got {nominal_prior}")
         self.nominal_model = model
         self.nominal_prior = float(nominal_prior)
-        self._average_cache: tuple[np.ndarray, np.ndarray, tuple] | None = None
+        self._average_cache: tuple[tuple, tuple] | None = None
         if float(acceleration_std) == 0.0:
             return model
         return ModelErrorCompensation(model, time_constant, acceleration_std)
@@ -80,13 +80,16 @@ class ModelErrorCompensated:
 
     def _average(self) -> tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(probability of the nominal model, mean (n,), covariance (n, n), acceleration (p,), its
-        covariance (p, p))``, model-averaged; kept for the compensated posterior it was computed from (a
-        node reads the estimate, the acceleration and the probabilities of the same step)."""
+        covariance (p, p))``, model-averaged; kept while the filter's state is the same objects
+        (:meth:`_state_token`: a node reads the estimate, the acceleration and the probabilities of the same
+        step, a multiple model its members' several times)."""
+        token = self._state_token()
+        cached = self._average_cache
+        if cached is not None and len(cached[0]) == len(token) and all(
+                a is b or (isinstance(a, float) and a == b) for a, b in zip(cached[0], token)):
+            return cached[1]
         n = self.nominal_model.state_dim
         mean, cov = super().mean, super().covariance
-        cached = self._average_cache
-        if cached is not None and np.array_equal(cached[0], mean) and np.array_equal(cached[1], cov):
-            return cached[2]
         a, A = mean[n:], cov[n:, n:]
         if not self.compensated:
             average = (0.0, mean[:n], cov[:n, :n], a, A)
@@ -98,7 +101,7 @@ class ModelErrorCompensated:
                 a, A = mixture_moments((probability, 1.0 - probability),
                                        [(np.zeros_like(a), np.zeros_like(A)), (a, A)])
             average = (probability, m, positive_definite(P), *self.model.world_acceleration(m, a, A))
-        self._average_cache = (np.array(mean), np.array(cov), average)
+        self._average_cache = (token, average)
         return average
 
     def _estimate(self) -> tuple[np.ndarray, np.ndarray]:

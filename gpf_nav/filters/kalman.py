@@ -137,6 +137,11 @@ class _GaussianFilter(Filter):
         """Covariance ``(n, n)``, positive definite (:func:`~gpf_nav.linalg.positive_definite`)."""
         return readonly_view(positive_definite(self._P))
 
+    def _state_token(self) -> tuple:
+        """What the estimate is a function of: ``x`` and ``P``, replaced at every step, never written in
+        place, so the same objects mean the same estimate."""
+        return self._x, self._P
+
 
 
 class ExtendedKF(InnovationGated, _GaussianFilter):

@@ -353,6 +353,11 @@ class ParticleFilter(Filter):
             kept = self._moments = (self._x, self._weights, mean, cov)
         return kept[2], kept[3]
 
+    def _state_token(self) -> tuple:
+        """What the estimate is a function of: the particles, the weights and the pending interval. The
+        arrays are replaced, never written in place, so the same objects mean the same estimate."""
+        return self._x, self._weights, self._pending_dt, self._pending_t
+
     def _use(self, sensor: Sensor | None) -> Sensor:
         """Make ``sensor`` (None: the model's own) the one this update measures with, and read its noise
         ``R``: the one place an update reads it (the whitening factors are cached until ``R`` changes)."""
@@ -377,7 +382,9 @@ class ParticleFilter(Filter):
         if bad.all():
             self._recover("every particle became non-finite")
             return False
-        self._x[:, bad] = self._x[:, np.flatnonzero(~bad)[0]][:, None]
+        x = self._x.copy()  # (a new array: the state is never written in place, :meth:`_state_token`)
+        x[:, bad] = x[:, np.flatnonzero(~bad)[0]][:, None]
+        self._x = x
         self._moments = None
         logw = self._logw.copy()
         logw[bad] = -np.inf
