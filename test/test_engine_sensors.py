@@ -6,9 +6,10 @@ import pytest
 
 from gpf_nav.estimator.engine import EngineConfig, EstimatorEngine
 from gpf_nav.estimator.factory import make_filter
-from gpf_nav.estimator.history import SNAPSHOT_EVERY
+from gpf_nav.estimator.history import SNAPSHOT_EVERY, configuration
 from gpf_nav.estimator.measurements import InnovationGate
-from gpf_nav.filters import SensorBiasFilter
+from gpf_nav.filters import ExtendedKF, SensorBiasFilter
+from gpf_nav.models import LinearGaussianModel
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 from gpf_nav.sim.sensor_suite import SuiteConfig, generate_suite, suite_sensors
 from gpf_nav.sensors import Bias, PositionSensor
@@ -105,6 +106,27 @@ def test_a_late_input_restarts_from_the_last_snapshot_before_it():
     mean, cov = _run(in_order, sensors, sorted(events + [late], key=lambda e: e[0]))
     np.testing.assert_array_equal(engine.mean, mean)
     np.testing.assert_array_equal(engine.cov, cov)
+
+
+def test_snapshots_share_the_packages_models_and_sensors_and_copy_the_state():
+    scenario, suite, sensors, engine = _setup("gpf")
+    _run(engine, sensors, [e for e in _events(scenario, suite) if e[1] == "rae"][:SNAPSHOT_EVERY + 1])
+    live, snapshot = engine.filter, engine.history.entries[SNAPSHOT_EVERY].before
+    for member, copied in zip(live.members, snapshot.members):
+        assert copied.model is member.model and copied._own_sensor is member._own_sensor
+        assert copied.rng is not member.rng and copied.time < member.time  # (the state before the input)
+    assert snapshot.nominal._x is not live.nominal._x
+
+
+class _UsersModel(LinearGaussianModel):
+    """A model class of the user's own: it may keep state that a snapshot must restore."""
+
+
+def test_a_users_model_is_copied_with_the_snapshot():
+    users = _UsersModel(np.eye(2), np.eye(2), 0.1 * np.eye(2), 0.1 * np.eye(2))
+    assert configuration(ExtendedKF(users)) == {}
+    ours = configuration(ExtendedKF(LinearGaussianModel(np.eye(2), np.eye(2), 0.1 * np.eye(2), 0.1 * np.eye(2))))
+    assert len(ours) == 2  # the model and its own sensor
 
 
 @pytest.mark.parametrize("name", ["ekf", "gpf"])

@@ -6,7 +6,9 @@ by restoring the last snapshot taken before the first input stamped after it, re
 between, applying the late one, and re-applying the inputs that came after
 (:meth:`gpf_nav.estimator.measurements.LateFusion.fuse`). A snapshot is a deep copy of the filter,
 so it holds everything an update depends on (particles, weights, the generator's state, gate streaks);
-re-application therefore gives bit for bit the estimate of in-order delivery. No ROS here.
+re-application therefore gives bit for bit the estimate of in-order delivery. The package's models and
+sensors are configuration that filtering never changes (they keep pure caches only): the snapshots of a
+filter that uses no others share them (:func:`configuration`), which halves the copy's cost. No ROS here.
 
 While IMU samples come late (an IMU sample delivered after the measurement it precedes, re-applied from
 the last snapshot before that measurement) the engine also keeps a snapshot of the newest input, dropped when
@@ -25,6 +27,9 @@ import bisect
 from dataclasses import dataclass
 
 import numpy as np
+
+from gpf_nav.models.state_space import StateSpaceModel
+from gpf_nav.sensors.sensor import Sensor
 
 SNAPSHOT_EVERY = 4
 """Inputs per snapshot: a late input re-applies at most ``SNAPSHOT_EVERY - 1`` more of them."""
@@ -106,3 +111,28 @@ class History:
         out = self.entries[j:]
         del self.entries[j:]
         return out
+
+
+def configuration(flt: object) -> dict[int, object]:
+    """The models and sensors ``flt`` refers to, by ``id``: a memo for :func:`copy.deepcopy` under which
+    copies of ``flt`` share them. Found by walking the attributes of ``gpf_nav``'s objects and their
+    containers. Empty (every copy its own) when one of them is a user's class: this package's models and
+    sensors keep nothing but pure caches, a user's may keep state that a snapshot must restore."""
+    found, seen, stack = {}, set(), [flt]
+    while stack:
+        item = stack.pop()
+        if id(item) in seen:
+            continue
+        seen.add(id(item))
+        own = type(item).__module__.startswith("gpf_nav.")
+        if isinstance(item, (StateSpaceModel, Sensor)):
+            if not own:
+                return {}
+            found[id(item)] = item
+        if isinstance(item, dict):
+            stack.extend(item.values())
+        elif isinstance(item, (list, tuple)):
+            stack.extend(item)
+        elif own and hasattr(item, "__dict__"):
+            stack.extend(vars(item).values())
+    return found

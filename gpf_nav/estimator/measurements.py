@@ -28,7 +28,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from gpf_nav.estimator.engine_config import NS, EngineConfig
-from gpf_nav.estimator.history import Entry, History
+from gpf_nav.estimator.history import Entry, History, configuration
 from gpf_nav.estimator.input_checks import ReapplyBudget
 from gpf_nav.filters.interface import Filter
 from gpf_nav.sensors import Sensor, innovation_distance
@@ -36,6 +36,10 @@ from gpf_nav.sensors import Sensor, innovation_distance
 Step = Callable[[int, np.ndarray, str, Sensor | None, bool], str]
 """The engine's step of one input: ``(stamp_ns, y, stream, sensor, feed_monitors) -> reason`` (predict to
 the stamp, update; ``""`` when updated)."""
+
+RESCAN_EVERY = 32
+"""Snapshots between two searches of the filter for the models and sensors its snapshots share (a search
+costs about a snapshot)."""
 
 
 @lru_cache(maxsize=64)
@@ -97,6 +101,8 @@ class LateFusion:
         self._step = step
         self._restore = restore
         self.start_ns = 0
+        self._configuration: tuple[object, dict[int, object]] | None = None
+        self._snapshots = 0
         self.reset()
 
     def reset(self) -> None:
@@ -139,7 +145,7 @@ class LateFusion:
         keep = self.history.length_ns > 0
         periodic = self.history.wants_snapshot()
         extra = not periodic and extra_due  # the newest input's snapshot
-        before = self._snapshot(flt) if keep and (periodic or extra) else None
+        before = self.snapshot(flt) if keep and (periodic or extra) else None
         if not keep or (before is None and len(self.history) == 0):  # (a failed copy emptied the history)
             return None
         return Entry(stamp_ns, stream, y, sensor, before, t_ns, dict(streaks), extra=extra and before is not None)
@@ -184,11 +190,19 @@ class LateFusion:
         for entry in entries:
             self._step(entry.t_ns, entry.y, entry.stream, entry.sensor, False)
 
-    def _snapshot(self, flt: Filter) -> Filter | None:
-        """A deep copy of ``flt`` for the history. A filter that cannot be copied empties the history
-        (None): late stamps before this input are then ``older_than_history``."""
+    def snapshot(self, flt: Filter) -> Filter | None:
+        """A deep copy of ``flt`` for the history, sharing its models and sensors
+        (:func:`~gpf_nav.estimator.history.configuration`, found again for a new filter model and every
+        :data:`RESCAN_EVERY` snapshots, so that sensors first used later are shared too; one not yet
+        found is copied). A filter that cannot be copied empties the history (None): late
+        stamps before this input are then ``older_than_history``."""
         try:
-            return copy.deepcopy(flt)
+            model = getattr(flt, "model", None)
+            self._snapshots += 1
+            if (self._configuration is None or self._configuration[0] is not model
+                    or self._snapshots % RESCAN_EVERY == 0):
+                self._configuration = (model, configuration(flt))
+            return copy.deepcopy(flt, dict(self._configuration[1]))
         except Exception:  # noqa: BLE001 - e.g. a user's filter wrapper: go on without late fusion
             self.history.clear()
             self.snapshot_failures += 1

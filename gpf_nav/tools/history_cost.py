@@ -3,14 +3,13 @@
 Runs :class:`gpf_nav.estimator.engine.EstimatorEngine` (no ROS) on a 120 s descent with rae every 2 s
 and the sensor suite (altimeter and velocimeter every 2 s, a TRN fix every 10 s delivered 4 s late) and
 prints, per filter: inputs kept in the history and the snapshots among them (one per
-:data:`~gpf_nav.estimator.history.SNAPSHOT_EVERY` inputs), the size of one snapshot (pickled filter), the time of
-a snapshot copy, of an in-order measurement (snapshot included) and of a late fix (restore, update and
+:data:`~gpf_nav.estimator.history.SNAPSHOT_EVERY` inputs), the size of one snapshot (pickled filter, its models and sensors included), the time
+of a snapshot copy, of an in-order measurement (snapshot included) and of a late fix (restore, update and
 re-application of the inputs stamped after it). Wall-clock figures: indicative on a loaded machine.
 """
 from __future__ import annotations
 
 import argparse
-import copy
 import pickle
 import time
 
@@ -54,7 +53,7 @@ def measure(name: str, n_particles: int, latency: float = 4.0, seed: int = 3) ->
     sizes = [len(pickle.dumps(e.before)) for e in engine.history.entries if e.before is not None]
     start = time.perf_counter()
     for _ in range(20):
-        copy.deepcopy(engine.filter)
+        engine.fusion.snapshot(engine.filter)
     return dict(filter=name, n=n_particles, inputs=len(engine.history), snapshots=len(sizes), snapshot_kb=np.mean(sizes) / 1e3,
                 history_mb=sum(sizes) / 1e6, copy_ms=(time.perf_counter() - start) / 20 * 1e3,
                 in_order_ms=np.median(in_order) * 1e3, late_ms=np.median(late) * 1e3,
