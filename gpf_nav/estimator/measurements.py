@@ -197,7 +197,7 @@ class LateFusion:
         found is copied). A filter that cannot be copied empties the history (None): late
         stamps before this input are then ``older_than_history``."""
         try:
-            model = getattr(flt, "model", None)
+            model = flt.model
             self._snapshots += 1
             if (self._configuration is None or self._configuration[0] is not model
                     or self._snapshots % RESCAN_EVERY == 0):
