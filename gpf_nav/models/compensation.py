@@ -88,6 +88,7 @@ class ModelErrorCompensation(StateSpaceModel):
         self.orthogonal_jacobian_rows = base.orthogonal_jacobian_rows
         self.compensation_index = tuple(range(n, n + p))
         self._n, self._p = n, p
+        self._decaying = n + np.arange(p)  # the acceleration's rows (its Jacobian's diagonal: the decay)
         # a local frame needs a acting on velocities (its axes are given in their coordinates)
         self._framed = bool(base.velocity_index) and type(base).compensation_frame is not \
             StateSpaceModel.compensation_frame
@@ -194,7 +195,7 @@ class ModelErrorCompensation(StateSpaceModel):
                 # stacked products are einsum's numbers at a fraction of its call's cost)
                 J[index, :self._n, self._n:] = G @ frame[..., index].transpose(2, 0, 1)
                 J[index, :self._n, :self._n] += G @ derivative[index]
-            J[index, self._n:, self._n:] = decay * np.eye(self._p)
+            J[index if isinstance(index, slice) else index[:, None], self._decaying, self._decaying] = decay
         return J
 
     def _frame(self, x: np.ndarray) -> np.ndarray | None:
