@@ -270,3 +270,11 @@ def orthogonal_projection(H, r, w, regularization, columns):
     shift = np.zeros((H.shape[2], H.shape[0]))
     shift[columns] = np.einsum("icn,in->cn", Hw, a * w[:, None])
     return shift, a.T
+
+
+def mixture_moments(weights, moments):
+    """Mean and covariance of ``sum_i weights_i N(m_i, P_i)``, weight-0 components left out (at 940346d)."""
+    terms = [(w, m, P) for w, (m, P) in zip(weights, moments) if w != 0.0]
+    mean = sum(w * m for w, m, _ in terms)
+    cov = sum(w * (P + np.outer(m - mean, m - mean)) for w, m, P in terms)
+    return mean, 0.5 * (cov + cov.T)

@@ -15,6 +15,7 @@ import numpy_reference as reference
 from gpf_nav import resampling
 from gpf_nav.filters import BootstrapPF, GeometricProjectionPF, MultipleModelGPF
 from gpf_nav.filters.kernel import match_moments
+from gpf_nav.filters.model_averaging import mixture_moments
 from gpf_nav.filters.projection import project, select_columns, select_rows
 from gpf_nav.linalg import positive_definite
 from gpf_nav.kernels import (VECTOR_MATH, bearing, cloud, covariance, diagonal_projection, information, log_weights,
@@ -553,3 +554,21 @@ def test_positive_definite_is_the_numpy_one_bit_for_bit():
     cov.flags.writeable = False
     np.testing.assert_array_equal(positive_definite(cov), reference.positive_definite(cov))
     np.testing.assert_array_equal(positive_definite(cases[3].T), reference.positive_definite(cases[3].T))
+
+
+def test_the_mixture_moments_are_the_numpy_ones_bit_for_bit():
+    """The model averages' mixture (gpf_nav/kernels/mixture.py) sums in the components' order, as the numpy
+    code did: the same numbers exactly, a weight-0 component with non-finite moments left out."""
+    rng = np.random.default_rng(90)
+    for count, d in ((1, 1), (2, 6), (4, 6), (4, 3), (5, 9)):
+        weights = rng.dirichlet(np.ones(count))
+        moments = []
+        for _ in range(count):
+            A = rng.standard_normal((d, d)) * rng.uniform(1e-3, 1e4)
+            moments.append((rng.uniform(-1e6, 1e6, d), A @ A.T))
+        if count > 2:
+            weights[1] = 0.0
+            moments[1] = (np.full(d, np.inf), np.full((d, d), np.nan))
+        got, expected = mixture_moments(weights, moments), reference.mixture_moments(weights, moments)
+        np.testing.assert_array_equal(got[0], expected[0])
+        np.testing.assert_array_equal(got[1], expected[1])

@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 
+from gpf_nav.kernels import mixture
 from gpf_nav.linalg import cholesky_or_none, triangular_inverse
 
 NOMINAL_PRIOR = 0.5
@@ -36,11 +37,9 @@ NEGLIGIBLE = 1e-12
 def mixture_moments(weights, moments: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
     """Mean ``(d,)`` and covariance ``(d, d)`` of ``sum_i weights_i N(m_i, P_i)``. A component of weight 0 takes
     no part, whatever its moments (a member of a multiple model that followed garbage to 1e154 has probability
-    0, and ``0 * inf`` would be NaN)."""
-    terms = [(w, m, P) for w, (m, P) in zip(weights, moments) if w != 0.0]
-    mean = sum(w * m for w, m, _ in terms)
-    cov = sum(w * (P + np.outer(m - mean, m - mean)) for w, m, P in terms)
-    return mean, 0.5 * (cov + cov.T)
+    0, and ``0 * inf`` would be NaN). One compiled pass (:func:`gpf_nav.kernels.mixture.moments`)."""
+    return mixture.moments(np.asarray(weights, dtype=float), np.array([m for m, _ in moments], dtype=float),
+                           np.array([P for _, P in moments], dtype=float))
 
 
 def _nominal_hypothesis(mean: np.ndarray, cov: np.ndarray, n: int, sigma: float,

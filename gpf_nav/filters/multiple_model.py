@@ -269,7 +269,7 @@ class MultipleModelGPF(Composite):
         self.model_probabilities = np.full(len(self.members), 1.0 / len(self.members))
         self._predicted_probabilities = self.model_probabilities
         self._mix_due = False
-        self._moments = None
+        self._moments = self._acceleration_moments = None
         self.last_log_likelihood = 0.0
 
     own_capabilities = frozenset({CLOUD, RESAMPLING, GATE, TEMPERING, MODEL_PROBABILITIES, COMPENSATION})
@@ -294,7 +294,7 @@ class MultipleModelGPF(Composite):
     # --- the filter interface ------------------------------------------------------------------------
     def initialize(self, mean, cov, t0: float = 0.0) -> None:
         """Every member from the user's prior ``N(mean (n,), cov (n, n))``; model probabilities alike."""
-        self._moments = None
+        self._moments = self._acceleration_moments = None
         for member in self.members:
             member.initialize(mean, cov, t0)
         self.model_probabilities = np.full(len(self.members), 1.0 / len(self.members))
@@ -302,7 +302,7 @@ class MultipleModelGPF(Composite):
         self._mix_due = False
 
     def predict(self, dt: float, u: np.ndarray | None = None) -> None:
-        self._moments = None
+        self._moments = self._acceleration_moments = None
         if self._mix_due and dt > 0.0:
             self._mix(dt)
         for member in self.members:
@@ -310,7 +310,7 @@ class MultipleModelGPF(Composite):
 
     def update(self, y: np.ndarray, sensor=None) -> None:
         """Every member updates with ``y`` of ``sensor`` (None: the model's); then the probabilities."""
-        self._moments = None
+        self._moments = self._acceleration_moments = None
         before = [(m.gated, m.recoveries) for m in self.members]
         for member in self.members:
             member.update(y, sensor)
@@ -389,7 +389,7 @@ class MultipleModelGPF(Composite):
             # mixed (module docstring, step 1)
         self._predicted_probabilities = predicted
         self._mix_due = False
-        self._moments = None
+        self._moments = self._acceleration_moments = None
 
     # --- the estimate --------------------------------------------------------------------------------
     @property
@@ -437,12 +437,20 @@ class MultipleModelGPF(Composite):
     @property
     def unmodelled_acceleration(self) -> np.ndarray:
         """Model-averaged unmodelled acceleration ``(p,)`` (the nominal model's is zero)."""
-        return mixture_moments(self.model_probabilities, self._accelerations())[0]
+        return self._acceleration_mixture()[0]
 
     @property
     def unmodelled_acceleration_covariance(self) -> np.ndarray:
         """Its covariance ``(p, p)``."""
-        return mixture_moments(self.model_probabilities, self._accelerations())[1]
+        return self._acceleration_mixture()[1]
+
+    def _acceleration_mixture(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(mean, covariance)`` of the models' accelerations, kept until the next step changes the members."""
+        if self._acceleration_moments is None:
+            self._acceleration_moments = mixture_moments(self.model_probabilities, self._accelerations())
+            for array in self._acceleration_moments:
+                array.flags.writeable = False
+        return self._acceleration_moments
 
     # --- particle diagnostics, model-averaged ----------------------------------------------------------
     @property
