@@ -85,8 +85,7 @@ class ModelErrorCompensated:
         step, a multiple model its members' several times)."""
         token = self._state_token()
         cached = self._average_cache
-        if cached is not None and len(cached[0]) == len(token) and all(
-                a is b or (isinstance(a, float) and a == b) for a, b in zip(cached[0], token)):
+        if cached is not None and all(a is b or (isinstance(a, float) and a == b) for a, b in zip(cached[0], token)):
             return cached[1]
         n = self.nominal_model.state_dim
         mean, cov = super().mean, super().covariance

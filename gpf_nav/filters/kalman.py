@@ -143,7 +143,6 @@ class _GaussianFilter(Filter):
         return self._x, self._P
 
 
-
 class ExtendedKF(InnovationGated, _GaussianFilter):
     """Extended Kalman filter: transition and measurement linearised about the current mean.
 

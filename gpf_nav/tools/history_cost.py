@@ -3,9 +3,10 @@
 Runs :class:`gpf_nav.estimator.engine.EstimatorEngine` (no ROS) on a 120 s descent with rae every 2 s
 and the sensor suite (altimeter and velocimeter every 2 s, a TRN fix every 10 s delivered 4 s late) and
 prints, per filter: inputs kept in the history and the snapshots among them (one per
-:data:`~gpf_nav.estimator.history.SNAPSHOT_EVERY` inputs), the size of one snapshot (pickled filter, its models and sensors included), the time
-of a snapshot copy, of an in-order measurement (snapshot included) and of a late fix (restore, update and
-re-application of the inputs stamped after it). Wall-clock figures: indicative on a loaded machine.
+:data:`~gpf_nav.estimator.history.SNAPSHOT_EVERY` inputs), the size of one snapshot (pickled filter, with the
+models and sensors the snapshots share), the time of a snapshot copy, of an in-order measurement (snapshot
+included) and of a late fix (restore, update and re-application of the inputs stamped after it). Wall-clock
+figures: indicative on a loaded machine.
 """
 from __future__ import annotations
 
