@@ -23,7 +23,7 @@ from gpf_nav.filters.gating import OUTLIER_GATE, OUTLIER_GATE_LIMIT
 from gpf_nav.filters.gpf import OBSERVABILITY_CONSTRAINT
 from gpf_nav.filters.interface import N_PARTICLES
 from gpf_nav.filters.multiple_model import (COMPENSATION_SCALES, COMPENSATION_TIMES, NARROW_FILTER, NESTING_GATE,
-                                            NOMINAL_SWITCH_TIME, SIZE_GATE, SWITCH_TIME)
+                                            NOMINAL_ACCELERATION_NOISE, NOMINAL_SWITCH_TIME, SIZE_GATE, SWITCH_TIME)
 from gpf_nav.models.state_space import StateSpaceModel
 
 KINDS = ("gpf", "particle", "ensemble", "kalman")
@@ -52,12 +52,13 @@ defaults: the update in the coordinates where the measurement, now and along the
 
 
 MEMBER_OPTIONS = frozenset({"switch_time", "nominal_switch_time", "compensation_scales", "compensation_times",
-                            "nesting_gate", "size_gate", "narrow_filter"})
+                            "nesting_gate", "size_gate", "narrow_filter", "nominal_acceleration_noise"})
 """Options of the multiple-model GPF's members (:class:`MultipleModelGPF`)."""
 ONE_MEMBER = MappingProxyType({"compensation_scales": (1.0,), "compensation_times": (1.0,), "nesting_gate": 0.0,
-                               "size_gate": 0.0, "nominal_switch_time": 0.0})
-"""Member options of ``gpf-pair``: the nominal member and one compensated member sized for the paper's
-mismatch (0.1 m/s^2, 1e6 s), without the nesting and size gates or the nominal model's own switch."""
+                               "size_gate": 0.0, "nominal_switch_time": 0.0, "nominal_acceleration_noise": 0.0})
+"""Member options of ``gpf-pair``: the nominal member on the user's model as it is and one compensated member
+sized for the paper's mismatch (0.1 m/s^2, 1e6 s), without the nesting and size gates or the nominal
+model's own switch."""
 
 
 @dataclass(frozen=True)
@@ -105,13 +106,14 @@ class FilterEntry:
 
 def _gpf(model, n_particles, seed, switch_time=SWITCH_TIME, nominal_switch_time=NOMINAL_SWITCH_TIME,
          compensation_scales=COMPENSATION_SCALES, compensation_times=COMPENSATION_TIMES, nesting_gate=NESTING_GATE,
-         size_gate=SIZE_GATE, narrow_filter=NARROW_FILTER, **options):
-    """The multiple model of the nominal and the compensated GPFs, or the nominal GPF alone when the
-    compensation is switched off (``unmodelled_acceleration_std`` 0)."""
+         size_gate=SIZE_GATE, narrow_filter=NARROW_FILTER, nominal_acceleration_noise=NOMINAL_ACCELERATION_NOISE,
+         **options):
+    """The multiple model of the nominal and the compensated GPFs, or the GPF on the user's model as it is
+    when the compensation is switched off (``unmodelled_acceleration_std`` 0)."""
     if options.get("unmodelled_acceleration_std", UNMODELLED_ACCELERATION_STD) == 0.0:
         return GeometricProjectionPF(model, n_particles, seed=seed, **options)
     return MultipleModelGPF(model, n_particles, switch_time=switch_time, nominal_switch_time=nominal_switch_time,
-                            seed=seed,
+                            nominal_acceleration_noise=nominal_acceleration_noise, seed=seed,
                             compensation_scales=compensation_scales, compensation_times=compensation_times,
                             nesting_gate=nesting_gate, size_gate=size_gate, narrow_filter=narrow_filter, **options)
 

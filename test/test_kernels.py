@@ -407,7 +407,7 @@ FILTERS = {
     # the nominal and one compensated member: the configuration the numpy reference was recorded with
     "gpf-pair": lambda model, n: MultipleModelGPF(model, n, seed=0, compensation_scales=(1.0,),
                                                   compensation_times=(1.0,), nesting_gate=0.0,
-                                                  nominal_switch_time=0.0),
+                                                  nominal_switch_time=0.0, nominal_acceleration_noise=0.0),
     "gpf-single": lambda model, n: GeometricProjectionPF(model, n, seed=0),
     "gpf-paper": lambda model, n: GeometricProjectionPF(model, n, seed=0, metric="euclidean",
                                                         weighting="likelihood", unmodelled_acceleration_std=0.0),

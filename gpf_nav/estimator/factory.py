@@ -14,7 +14,8 @@ from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD, UNMODELLED_
 from gpf_nav.filters.interface import N_PARTICLES
 from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
 from gpf_nav.filters.multiple_model import (COMPENSATION_SCALES, COMPENSATION_TIMES, NARROW_FILTER, NARROW_FILTERS,
-                                            NESTING_GATE, NOMINAL_SWITCH_TIME, SIZE_GATE, SWITCH_TIME)
+                                            NESTING_GATE, NOMINAL_ACCELERATION_NOISE, NOMINAL_SWITCH_TIME, SIZE_GATE,
+                                            SWITCH_TIME)
 from gpf_nav.models.gravity import FIELDS, make_field
 from gpf_nav.models.lunar import LunarDescentModel
 
@@ -31,6 +32,7 @@ def make_filter(name: str, model, *, n_particles: int = N_PARTICLES, seed: int |
                 nominal_prior: float = NOMINAL_PRIOR, kernel_bandwidth: float = 0.0,
                 flattening_horizon: float = registry.FLATTENING_HORIZON, model_switch_time: float = SWITCH_TIME,
                 nominal_switch_time: float = NOMINAL_SWITCH_TIME,
+                nominal_acceleration_noise: float = NOMINAL_ACCELERATION_NOISE,
                 compensation_scales=COMPENSATION_SCALES, compensation_times=COMPENSATION_TIMES,
                 nesting_gate: float = NESTING_GATE, size_gate: float = SIZE_GATE, narrow_filter: str = NARROW_FILTER,
                 collapse_steps: int = 0,
@@ -57,6 +59,7 @@ def make_filter(name: str, model, *, n_particles: int = N_PARTICLES, seed: int |
                                   nominal_prior=nominal_prior, kernel_bandwidth=kernel_bandwidth,
                                   flattening_horizon=flattening_horizon, model_switch_time=model_switch_time,
                                   nominal_switch_time=nominal_switch_time,
+                                  nominal_acceleration_noise=nominal_acceleration_noise,
                                   compensation_scales=compensation_scales, compensation_times=compensation_times,
                                   nesting_gate=nesting_gate, size_gate=size_gate, narrow_filter=narrow_filter)
     if errors:
@@ -66,6 +69,7 @@ def make_filter(name: str, model, *, n_particles: int = N_PARTICLES, seed: int |
                    unmodelled_acceleration_std=unmodelled_acceleration_std,
                    unmodelled_acceleration_time=unmodelled_acceleration_time, nominal_prior=nominal_prior,
                    switch_time=model_switch_time, nominal_switch_time=nominal_switch_time,
+                   nominal_acceleration_noise=float(nominal_acceleration_noise),
                    compensation_scales=_floats(compensation_scales), compensation_times=_floats(compensation_times),
                    nesting_gate=float(nesting_gate), size_gate=float(size_gate), narrow_filter=narrow_filter,
                    resampling=resampling,
@@ -87,6 +91,7 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
                          unmodelled_acceleration_time=1.0, nominal_prior=0.0, kernel_bandwidth=0.0,
                          flattening_horizon=0.0, model_switch_time=SWITCH_TIME,
                          nominal_switch_time=NOMINAL_SWITCH_TIME,
+                         nominal_acceleration_noise=NOMINAL_ACCELERATION_NOISE,
                          compensation_scales=COMPENSATION_SCALES,
                          compensation_times=COMPENSATION_TIMES, nesting_gate=NESTING_GATE, size_gate=SIZE_GATE,
                          narrow_filter=NARROW_FILTER) -> list[str]:
@@ -121,6 +126,9 @@ def check_filter_options(name, *, n_particles, reference, weighting, regularizat
             errors.append(f"parameter 'model_switch_time' = {model_switch_time!r} must be positive [s]")
         if not (math.isfinite(nominal_switch_time) and nominal_switch_time >= 0.0):
             errors.append(f"parameter 'nominal_switch_time' = {nominal_switch_time!r} must be >= 0 (0: none) [s]")
+        if not (math.isfinite(nominal_acceleration_noise) and nominal_acceleration_noise >= 0.0):
+            errors.append(f"parameter 'nominal_acceleration_noise' = {nominal_acceleration_noise!r} must be >= 0 "
+                          "(0: none) [m^2/s^3]")
         scales, times = _floats(compensation_scales), _floats(compensation_times)
         if not scales or scales[-1] != 1.0 or any(not a < b for a, b in zip((0.0,) + scales, scales)):
             errors.append(f"parameter 'compensation_scales' = {list(scales)!r} must increase from above 0 to 1")

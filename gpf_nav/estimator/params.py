@@ -25,7 +25,8 @@ from gpf_nav.filters.compensated import UNMODELLED_ACCELERATION_STD, UNMODELLED_
 from gpf_nav.filters.interface import N_PARTICLES
 from gpf_nav.filters.model_averaging import NOMINAL_PRIOR
 from gpf_nav.filters.multiple_model import (COMPENSATION_SCALES, COMPENSATION_TIMES, NARROW_FILTER, NARROW_FILTERS,
-                                            NESTING_GATE, NOMINAL_SWITCH_TIME, SIZE_GATE, SWITCH_TIME)
+                                            NESTING_GATE, NOMINAL_ACCELERATION_NOISE, NOMINAL_SWITCH_TIME, SIZE_GATE,
+                                            SWITCH_TIME)
 from gpf_nav.models.gravity import FIELDS
 from gpf_nav.models.lunar import MU_MOON
 from gpf_nav.registry import FLATTENING_HORIZON
@@ -55,13 +56,14 @@ ESTIMATOR = [
         Spec("unmodelled_acceleration_std", UNMODELLED_ACCELERATION_STD, "gpf: stationary std of the estimated unmodelled acceleration; 0 turns the compensation off (gpf-mm needs it positive).", "m/s^2", ">= 0", checked_by=_BY_FILTER),
         Spec("unmodelled_acceleration_time", UNMODELLED_ACCELERATION_TIME, "gpf: correlation time of the unmodelled acceleration.", "s", "> 0", checked_by=_BY_FILTER),
         Spec("nominal_prior", NOMINAL_PRIOR, "gpf-single: prior probability that the model needs no unmodelled acceleration; the estimate averages the two hypotheses; 0 publishes the compensated posterior as it is.", bounds="[0, 1)", checked_by=_BY_FILTER),
-        Spec("compensation_scales", list(COMPENSATION_SCALES), "gpf: the compensated members' acceleration stds as fractions of unmodelled_acceleration_std, increasing to 1: one member per scale beside the nominal one, so that a force from far below to the size of unmodelled_acceleration_std has a member of its size.", bounds="(0, 1]", checked_by=_BY_FILTER),
+        Spec("compensation_scales", list(COMPENSATION_SCALES), "gpf: the compensated members' acceleration stds as fractions of unmodelled_acceleration_std, increasing to 1: one member per scale beside the nominal one, so that a force up to the size of unmodelled_acceleration_std has a member of its size.", bounds="(0, 1]", checked_by=_BY_FILTER),
         Spec("compensation_times", list(COMPENSATION_TIMES), "gpf: the compensated members' correlation times as fractions of unmodelled_acceleration_time, one per compensation scale, the last 1: a member of short time follows a force that varies along the orbit.", bounds="> 0", checked_by=_BY_FILTER),
         Spec("nesting_gate", NESTING_GATE, "gpf: chi-square probability of the gate by which the widest compensated member must admit another member's estimate for it to keep its probability while the data leave a direction undetermined (a member that explains an error the data cannot see with a narrower model); 0: no gate.", bounds="[0, 1)", checked_by=_BY_FILTER),
         Spec("size_gate", SIZE_GATE, "gpf: chi-square probability of the gate beyond which a narrow compensated member's estimated acceleration, in its own prior's sigmas, says the force is a wider member's size: the member loses its probability for that update; 0: no gate.", bounds="[0, 1)", checked_by=_BY_FILTER),
         Spec("narrow_filter", NARROW_FILTER, "gpf: the filter of the compensated members narrower than the widest: ekf (a compensated EKF with the GPF's innovation gate; the nominal and the widest member stay GPFs) or gpf.", choices=NARROW_FILTERS, checked_by=_BY_FILTER),
         Spec("model_switch_time", SWITCH_TIME, "gpf: mean sojourn time of the nominal / compensated model chain.", "s", "> 0", checked_by=_BY_FILTER),
-        Spec("nominal_switch_time", NOMINAL_SWITCH_TIME, "gpf: mean time after which the nominal model also switches to the narrowest compensated one, which keeps that member, whose covariance holds a force too small for the data to show, in the estimate (the Moon's J2); 0: no such switch.", "s", ">= 0", checked_by=_BY_FILTER),
+        Spec("nominal_acceleration_noise", NOMINAL_ACCELERATION_NOISE, "gpf: spectral density of a white acceleration added to the nominal member's process noise, so that its covariance holds forces below every compensated member's size (the Moon's J2); 0: the model as it is.", "m^2/s^3", ">= 0", checked_by=_BY_FILTER),
+        Spec("nominal_switch_time", NOMINAL_SWITCH_TIME, "gpf: mean time after which the nominal model also switches to the narrowest compensated one, which keeps that member in the estimate; 0: no such switch.", "s", ">= 0", checked_by=_BY_FILTER),
         Spec("kernel_bandwidth", 0.0, "gpf, cloud metric: kernel bandwidth h; 0: the default, the Gaussian-optimal one for N and the state dimension, 1.6 times it while an update is tempered or gated (gpf-single: 1.6 times it always; at most 0.95).", bounds="[0, 1)", symbol="h", checked_by=_BY_FILTER),
         Spec("flattening_horizon", FLATTENING_HORIZON, "gpf: the update runs in coordinates where the measurement now and of the state flowed half this and this far ahead is linear, so the cloud keeps its spread along what the data cannot see; 0: the measurement now only.", "s", ">= 0", checked_by=_BY_FILTER),
         Spec("collapse_steps", 0, "gpf/spf: re-initialise after this many consecutive updates with ESS < 1.5 particles; 0 never.", bounds=">= 0", checked_by=_BY_FILTER),

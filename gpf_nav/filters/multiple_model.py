@@ -9,17 +9,24 @@ against a compensation sized for the paper's 9 % gravity mismatch, 0.13 m/s^2); 
 cannot be followed. :class:`MultipleModelGPF` tests the hypotheses instead of assuming one: filters run in
 parallel, one on the user's model as it is (``nominal``) and one per compensation scale, with
 ``sigma_j = compensation_scales[j] * unmodelled_acceleration_std`` and correlation time
-``tau_j = compensation_times[j] * unmodelled_acceleration_time``: by default three compensated members, 1e-3,
-1e-2 and 0.1 m/s^2 with 2e4, 1e4 and 1e6 s, so that a force from 1e-4 to 0.2 m/s^2, constant or turning
-along the orbit, has a member of its size and pace, or between two members is the wider one's (step 5). A
-Markov chain switches between the ``K`` models with mean sojourn ``switch_time``, a switch going to each
-other model alike; and the nominal model also switches to the narrowest compensated one with mean sojourn
-``nominal_switch_time``: that no force acts is never established by the data, since a force far below the
-measurements' noise (the Moon's J2 seen in range, azimuth and elevation) changes the next measurement by
-less than the nominal model's narrower prediction gains in evidence, so the nominal model would win the
-evidence and, with no process noise for the force, its covariance would shrink below its error (NEES 40 to
-100 over the last third of a J2 descent while it held 97 % of the probability). The switch keeps the
-narrowest model, whose covariance holds the force, in the mixture.
+``tau_j = compensation_times[j] * unmodelled_acceleration_time``: by default two compensated members, 1e-2
+and 0.1 m/s^2 with 1e4 and 1e6 s, so that a thrust of a few mm/s^2 that turns and a mismatch up to 0.2
+m/s^2 each have a member of their size, or between two members is the wider one's (step 5). A Markov chain
+switches between the ``K`` models with mean sojourn ``switch_time``, a switch going to each other model
+alike.
+
+**Forces below every member's size.** That no force acts is never established by the data: a force far
+below the measurements' noise (the Moon's J2, 4.6e-4 m/s^2, seen in range, azimuth and elevation) changes
+the next measurement by less than the nominal model's narrower prediction gains in evidence, so the nominal
+model wins the evidence and, with no process noise for the force, its covariance shrinks below its error
+(NEES 40 to 100 over the last third of a J2 descent while it held 97 % of the probability). The nominal
+member therefore runs on the user's model with a white acceleration of spectral density
+``nominal_acceleration_noise`` added to its process noise
+(:class:`~gpf_nav.models.acceleration_noise.WhiteAccelerationNoise`): its covariance holds what such a
+force can do between measurements, and, unlike a compensated member of that size, it carries no
+acceleration learnt from noise across a gap in the data. ``nominal_switch_time`` > 0 instead (or as well)
+switches the nominal model to the narrowest compensated one with that mean sojourn, which keeps a member
+whose covariance holds the force in the mixture.
 
 **Which filter each member is.** The nominal member and the widest compensated one are GPFs: between
 them they carry the estimate wherever the data leave the state far from linear (a large prior, range
@@ -54,7 +61,7 @@ Each cycle is Blom's interacting multiple model (IMM):
    less when its own evidence with the refused components at its gate's edge is less
    (:attr:`~gpf_nav.filters.gating.InnovationGated.refused_log_likelihood`: a refused component lies
    beyond the edge, so that bounds what it would have found). Leaving every probability at ``c``
-   instead would let one member that cannot follow the data (the 1e-3 m/s² member under the paper's
+   instead would let one member that cannot follow the data (a 1e-3 m/s² member under the paper's
    9 % mismatch refuses a component in a quarter of the updates) stop the others' evidence; the lowest
    of the users' alone, with one member using a component that the others refuse, ties them with it
    whatever it found, so members that the data have left would keep their probability while they refuse.
@@ -111,39 +118,44 @@ from gpf_nav.filters.interface import (CLOUD, COMPENSATION, COSTATE, GATE, MODEL
                                        TEMPERING, N_PARTICLES, Filter)
 from gpf_nav.filters.model_averaging import mixture_moments
 from gpf_nav.linalg import positive_definite
+from gpf_nav.models.acceleration_noise import WhiteAccelerationNoise
 from gpf_nav.models.state_space import StateSpaceModel
 
 SWITCH_TIME = 2.0e5
 """Default mean sojourn time of the model chain, s (switching probability 1e-5 per 2 s step)."""
-NOMINAL_SWITCH_TIME = 4.0e3
+NOMINAL_ACCELERATION_NOISE = 1.0e-5
+"""Default spectral density of the white acceleration added to the nominal member's process noise, m^2/s^3
+(module docstring, *Forces below every member's size*; 0: the user's model as it is). A constant force
+``a`` and this noise move the velocity alike over ``T = q / a^2``: 50 s for the Moon's J2, about 25
+measurements of the lunar descent. Under J2 unmodelled, 20 runs each, at 3e-6 m^2/s^3 up to 21 % of the
+steps were above the chi-square bound without azimuth; at 1e-5, 1-3 %."""
+NOMINAL_SWITCH_TIME = 0.0
 """Default mean time after which the nominal model switches to the narrowest compensated one, s (0: only
-as the chain's other switches; module docstring). Under the Moon's J2 the share of steps above the
-chi-square bound, 10-15 % on two of three campaign seeds with the uniform chain alone, falls to 1-5 %.
-Where the nominal model is right the narrowest member is about as accurate (the point-mass descent, range
-only), except across a long gap in the data: with two surface beacons and 1 400 s between them it carries
-the acceleration it learnt from noise through the gap (238 m against 205 m without the switch). A uniform
-chain as fast (``switch_time`` 4e3 s) would also keep the wider members in the mixture and spoil range only,
-where their estimates wander along the unseen rotations (20.6 km against 1.1 km)."""
-COMPENSATION_SCALES = (0.01, 0.1, 1.0)
+as the chain's other switches; module docstring). Across a long gap in the data the narrowest member
+carries the acceleration it learnt from noise (two surface beacons 1 400 s apart), which the nominal
+member's white acceleration does not."""
+COMPENSATION_SCALES = (0.1, 1.0)
 """Default compensation scales: the compensated members' ``sigma`` as fractions of
-``unmodelled_acceleration_std`` (module docstring): with its default 0.1 m/s^2, members of 1e-3, 1e-2 and
-0.1 m/s^2, so that the Moon's J2 (4.6e-4 m/s^2), a thrust of a few mm/s^2 and the paper's 9 % mismatch
-(0.13 m/s^2) each have a member of their size. A force between two members (a 2 % gravity mismatch, 0.03
-m/s^2) is the wider one's: the size gate (step 5) refuses the narrower one, whose estimate says the force
-is beyond its prior. A member of 0.03 m/s^2 between them, an EKF, won the evidence against that force
-without azimuth, honest but with 1.22 times the widest GPF member's position error (the EKF's
-linearisation across a cloud kilometres wide); as a GPF it would cost a third GPF member."""
-COMPENSATION_TIMES = (0.02, 0.01, 1.0)
+``unmodelled_acceleration_std`` (module docstring): with its default 0.1 m/s^2, members of 1e-2 and 0.1
+m/s^2, so that a thrust of a few mm/s^2 and the paper's 9 % mismatch (0.13 m/s^2) each have a member of
+their size; forces below them are the nominal member's white acceleration's. A force between two members
+(a 2 % gravity mismatch, 0.03 m/s^2) is the wider one's: the size gate (step 5) refuses the narrower one,
+whose estimate says the force is beyond its prior. A member of 0.03 m/s^2 between them, an EKF, won the
+evidence against that force without azimuth, honest but with 1.22 times the widest GPF member's position
+error (the EKF's linearisation across a cloud kilometres wide); as a GPF it would cost a third GPF member.
+A member of 1e-3 m/s^2 for the Moon's J2 carried the acceleration it learnt from noise across long gaps
+in the data."""
+COMPENSATION_TIMES = (0.01, 1.0)
 """Default correlation times of the compensated members as fractions of ``unmodelled_acceleration_time``
-(with its default 1e6 s: 2e4, 1e4 and 1e6 s). A force of size ``sigma`` changes by about
-``sigma sqrt(2 T / tau)`` over a time ``T``: the smallest member follows J2 as it varies along the
-orbit, the 1e-2 one a thrust that turns, the widest one learns a constant mismatch and keeps it. No
-member's acceleration may change faster than the widest member's, ``2 sigma^2 / tau`` (the intensity of
-its driving noise: 1e-10, 2e-8 and 2e-8 m^2/s^5), so that the widest model contains every other in pace
-as well as in size (step 4). A faster member (1e-2 m/s^2 at 2e3 s, five times the widest's pace) is
-wider than the widest along a direction no measurement sees: without azimuth its state wanders there,
-its estimate stays inside the widest member's gate, and it wins the evidence by predicting the next
-measurement well (an unmodelled drag in Case 2: 1.40 times the position error)."""
+(with its default 1e6 s: 1e4 and 1e6 s). A force of size ``sigma`` changes by about
+``sigma sqrt(2 T / tau)`` over a time ``T``: the 1e-2 member follows a thrust that turns, the widest one
+learns a constant mismatch and keeps it. No member's acceleration may change faster than the widest
+member's, ``2 sigma^2 / tau`` (the intensity of its driving noise: 2e-8 m^2/s^5 for both), so that the
+widest model contains every other in pace as well as in size (step 4). A faster member (1e-2 m/s^2 at 2e3
+s, five times the widest's pace) is wider than the widest along a direction no measurement sees: without
+azimuth its state wanders there, its estimate stays inside the widest member's gate, and it wins the
+evidence by predicting the next measurement well (an unmodelled drag in Case 2: 1.40 times the position
+error)."""
 NESTING_GATE = 0.999
 """Probability of the chi-square gate by which the widest member's posterior must admit a narrower
 member's estimate for that member to keep its probability, while the data leave a direction undetermined
@@ -152,8 +164,8 @@ member explains the error left there with a wrong state and wins the evidence.""
 SIZE_GATE = 0.8
 """Probability of the size gate (step 5 of the module docstring; 0: no gate): a narrow member whose estimated
 acceleration lies beyond this quantile of its own prior (``a^T a / sigma^2 > chi^2_p``, 2.15 sigmas for
-``p = 3``) is refused. Members of the force's size keep theirs well inside it (the Moon's J2 at 0.46 of the
-1e-3 m/s^2 member's sigma, a thrust of 5 mm/s^2 at 0.5 of the 1e-2 m/s^2 member's); at 0.99 (3.4 sigmas) the
+``p = 3``) is refused. Members of the force's size keep theirs well inside it (a thrust of 5 mm/s^2 at 0.5 of the
+1e-2 m/s^2 member's sigma); at 0.99 (3.4 sigmas) the
 gate never fires against a 2 % gravity mismatch (0.03 m/s^2), and the 1e-2 m/s^2 member, its acceleration
 shrunk and lagging, keeps winning there."""
 NESTING_SPREAD = 0.5
@@ -178,6 +190,10 @@ class MultipleModelGPF(Composite):
         model: the user's state-space model.
         n_particles: particles of each member.
         switch_time: mean sojourn time of the model chain, s (> 0).
+        nominal_acceleration_noise: spectral density of the white acceleration added to the nominal
+            member's process noise, m^2/s^3 (>= 0; 0: the user's model as it is; default
+            :data:`NOMINAL_ACCELERATION_NOISE`); on the model's position/velocity pairs
+            (:class:`~gpf_nav.models.acceleration_noise.WhiteAccelerationNoise`).
         nominal_switch_time: mean time after which the nominal model switches to the narrowest
             compensated one, s (>= 0; 0: no such switch; default :data:`NOMINAL_SWITCH_TIME`).
         compensation_scales: the compensated members' acceleration standard deviations as fractions of
@@ -198,7 +214,7 @@ class MultipleModelGPF(Composite):
             compensated ones.
 
     Attributes:
-        nominal: the member on the user's model (a GPF).
+        nominal: the member on the user's model, its white acceleration added (a GPF).
         scaled: the compensated members, by increasing ``sigma`` (the widest a GPF, the others
             ``narrow_filter``'s).
         compensated: the widest of them (``sigma = unmodelled_acceleration_std``): its model contains
@@ -211,11 +227,14 @@ class MultipleModelGPF(Composite):
                  compensation_scales: tuple[float, ...] = COMPENSATION_SCALES,
                  compensation_times: tuple[float, ...] = COMPENSATION_TIMES,
                  nesting_gate: float = NESTING_GATE, size_gate: float = SIZE_GATE,
-                 narrow_filter: str = NARROW_FILTER, **options):
+                 narrow_filter: str = NARROW_FILTER,
+                 nominal_acceleration_noise: float = NOMINAL_ACCELERATION_NOISE, **options):
         if not (math.isfinite(switch_time) and switch_time > 0):
             raise ValueError(f"switch_time must be positive, got {switch_time}")
         if not (math.isfinite(nominal_switch_time) and nominal_switch_time >= 0):
             raise ValueError(f"nominal_switch_time must be >= 0, got {nominal_switch_time}")
+        if not (math.isfinite(nominal_acceleration_noise) and nominal_acceleration_noise >= 0):
+            raise ValueError(f"nominal_acceleration_noise must be >= 0, got {nominal_acceleration_noise}")
         scales = tuple(float(s) for s in compensation_scales)
         if not scales or scales[-1] != 1.0 or any(not a < b for a, b in zip((0.0,) + scales, scales)):
             raise ValueError(f"compensation_scales must increase from above 0 to 1, got {compensation_scales}")
@@ -238,7 +257,9 @@ class MultipleModelGPF(Composite):
         # the nominal and the widest member keep the first two streams whatever the number of scales
         streams = np.random.SeedSequence(np.random.default_rng(seed).integers(2 ** 63)).spawn(len(scales) + 1)
         nominal_options = {k: v for k, v in options.items() if not k.startswith("unmodelled_acceleration")}
-        self.nominal = GeometricProjectionPF(model, n_particles, unmodelled_acceleration_std=0.0,
+        nominal_model = (WhiteAccelerationNoise(model, nominal_acceleration_noise) if nominal_acceleration_noise > 0
+                         else model)
+        self.nominal = GeometricProjectionPF(nominal_model, n_particles, unmodelled_acceleration_std=0.0,
                                              seed=np.random.default_rng(streams[0]), **nominal_options)
         stream_of = [*range(2, len(scales) + 1), 1]  # the widest member's is the second stream
         gate = {key: options.get(key, default) for key, default in
