@@ -24,6 +24,7 @@ from gpf_nav.filters.gpf import OBSERVABILITY_CONSTRAINT
 from gpf_nav.filters.interface import N_PARTICLES
 from gpf_nav.filters.multiple_model import (COMPENSATION_SCALES, COMPENSATION_TIMES, NARROW_FILTER, NESTING_GATE,
                                             NOMINAL_ACCELERATION_NOISE, NOMINAL_SWITCH_TIME, SIZE_GATE, SWITCH_TIME)
+from gpf_nav.models.acceleration_noise import WhiteAccelerationNoise
 from gpf_nav.models.state_space import StateSpaceModel
 
 KINDS = ("gpf", "particle", "ensemble", "kalman")
@@ -140,6 +141,10 @@ def _enkf(model, n_particles, seed, **options):
     return EnsembleKF(model, n_particles, seed=seed, **options)
 
 
+def _ekf_white(model, n_particles, seed, **options):
+    return ExtendedKF(WhiteAccelerationNoise(model, NOMINAL_ACCELERATION_NOISE), seed=seed, **options)
+
+
 def _ekf_compensated(**fixed) -> Callable[..., Filter]:
     return lambda model, n_particles, seed, **options: CompensatedEKF(model, seed=seed, **{**fixed, **options})
 
@@ -168,9 +173,10 @@ for _entry in (
                     model, n_particles, seed, **{**NAVIGATION_GPF, **options}),
                 "gpf", GPF_OPTIONS | MEMBER_OPTIONS, "navigation", node=True, aliases=("gpf-mm", "gpf-ladder"),
                 description="the multiple-model GPF: navigation-grade GPFs (cloud metric, exact weights, "
-                            "tempering, the update flattened along the flow) on the nominal model and on a "
-                            "compensated model of 0.1 m/s^2, compensated EKFs of 1e-3 and 1e-2 m/s^2, "
-                            "with the nesting and size gates; the node's default"),
+                            "tempering, the update flattened along the flow) on the nominal model, its process "
+                            "noise widened by a white acceleration of 1e-5 m^2/s^3, and on a compensated model "
+                            "of 0.1 m/s^2, a compensated EKF of 1e-2 m/s^2, with the nesting and size gates; the "
+                            "node's default"),
     FilterEntry("gpf-pair", "GPF navigation, one compensated member",
                 lambda model, n_particles, seed, **options: _gpf(
                     model, n_particles, seed, **{**NAVIGATION_GPF, **options, **ONE_MEMBER}),
@@ -219,6 +225,9 @@ for _entry in (
     FilterEntry("ekf-comp-gated", "EKF + compensation, gated",
                 _ekf_compensated(outlier_gate=OUTLIER_GATE, outlier_gate_limit=OUTLIER_GATE_LIMIT), "kalman",
                 description="ekf-comp with the GPF's innovation gate (same gate and limit)"),
+    FilterEntry("ekf-white", "EKF + white acceleration", _ekf_white, "kalman",
+                description="EKF on the model with gpf's nominal white acceleration added to its process noise "
+                            "(nominal_acceleration_noise, 1e-5 m^2/s^3)"),
 ):
     register(_entry)
 
