@@ -2,7 +2,7 @@
 
 The filters are :mod:`gpf_nav.registry` entries, by name (default :data:`FILTERS`): ``gpf`` is the
 default (navigation-grade) configuration, the multiple-model GPF (a nominal and a compensated GPF of N
-particles each, and three compensated EKFs), ``gpf-paper`` the paper's, ``gpf-single`` one
+particles each, and a compensated EKF), ``gpf-paper`` the paper's, ``gpf-single`` one
 navigation-grade GPF of N particles on the compensated model, ``spf`` the bootstrap PF without its
 diagnostic co-state, and ``particles`` N. Chopin's bootstrap filter on the same model when that library is installed
 (:mod:`gpf_nav.experiments.peer_particles`; skipped otherwise).
