@@ -7,7 +7,7 @@ model does not need. It also has a scale: its prior, the acceleration's stationa
 by the evidence, so the nominal model wins and ignores it, overconfident (the Moon's J2, 4.6e-4 m/s^2,
 against a compensation sized for the paper's 9 % gravity mismatch, 0.13 m/s^2); a force far above it
 cannot be followed. :class:`MultipleModelGPF` tests the hypotheses instead of assuming one: filters run in
-parallel, one on the user's model as it is (``nominal``) and one per compensation scale, with
+parallel, one on the user's model (``nominal``) and one per compensation scale, with
 ``sigma_j = compensation_scales[j] * unmodelled_acceleration_std`` and correlation time
 ``tau_j = compensation_times[j] * unmodelled_acceleration_time``: by default two compensated members, 1e-2
 and 0.1 m/s^2 with 1e4 and 1e6 s, so that a thrust of a few mm/s^2 that turns and a mismatch up to 0.2
@@ -128,7 +128,7 @@ NOMINAL_ACCELERATION_NOISE = 1.0e-5
 (module docstring, *Forces below every member's size*; 0: the user's model as it is). A constant force
 ``a`` and this noise move the velocity alike over ``T = q / a^2``: 50 s for the Moon's J2, about 25
 measurements of the lunar descent. Under J2 unmodelled, 20 runs each, at 3e-6 m^2/s^3 up to 21 % of the
-steps were above the chi-square bound without azimuth; at 1e-5, 1-3 %."""
+steps were above the chi-square bound without azimuth; at 1e-5, 1-5 % on three campaign seeds (docs/results.md)."""
 NOMINAL_SWITCH_TIME = 0.0
 """Default mean time after which the nominal model switches to the narrowest compensated one, s (0: only
 as the chain's other switches; module docstring). Across a long gap in the data the narrowest member
@@ -164,10 +164,9 @@ member explains the error left there with a wrong state and wins the evidence.""
 SIZE_GATE = 0.8
 """Probability of the size gate (step 5 of the module docstring; 0: no gate): a narrow member whose estimated
 acceleration lies beyond this quantile of its own prior (``a^T a / sigma^2 > chi^2_p``, 2.15 sigmas for
-``p = 3``) is refused. Members of the force's size keep theirs well inside it (a thrust of 5 mm/s^2 at 0.5 of the
-1e-2 m/s^2 member's sigma); at 0.99 (3.4 sigmas) the
-gate never fires against a 2 % gravity mismatch (0.03 m/s^2), and the 1e-2 m/s^2 member, its acceleration
-shrunk and lagging, keeps winning there."""
+``p = 3``) is refused. Members of the force's size keep theirs well inside it (a thrust of 5 mm/s^2 at 0.5 of
+the 1e-2 m/s^2 member's sigma); at 0.99 (3.4 sigmas) the gate never fires against a 2 % gravity mismatch
+(0.03 m/s^2), and the 1e-2 m/s^2 member, its acceleration shrunk and lagging, keeps winning there."""
 NESTING_SPREAD = 0.5
 """Fraction of the nominal member's variance along each undetermined direction below which a narrow
 compensated member is refused by the nesting gate (step 4 of the module docstring). The bound of exact
