@@ -175,7 +175,7 @@ for _entry in (
                 description="the multiple-model GPF: navigation-grade GPFs (cloud metric, exact weights, "
                             "tempering, the update flattened along the flow) on the nominal model, its process "
                             "noise widened by a white acceleration of 1e-5 m^2/s^3, and on a compensated model "
-                            "of 0.1 m/s^2, a compensated EKF of 1e-2 m/s^2, with the nesting and size gates; the "
+                            "of 0.1 m/s^2, a compensated EKF of 2e-3 m/s^2, with the nesting and size gates; the "
                             "node's default"),
     FilterEntry("gpf-pair", "GPF navigation, one compensated member",
                 lambda model, n_particles, seed, **options: _gpf(

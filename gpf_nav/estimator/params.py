@@ -46,7 +46,7 @@ def _group(name: str, *specs: Spec) -> list[Spec]:
 ESTIMATOR = [
     *_group(
         FILTER_GROUP,
-        Spec("filter", "gpf", "gpf (geometric projection PF, multiple model: nominal or compensated at 1e-3, 1e-2 and 0.1 m/s^2), gpf-single (one compensated GPF), gpf-mm and gpf-ladder (= gpf), spf (bootstrap PF), ekf, ukf or enkf.", choices=FILTERS, checked_by=_BY_FILTER),
+        Spec("filter", "gpf", "gpf (geometric projection PF, multiple model: nominal or compensated at 2e-3 and 0.1 m/s^2), gpf-single (one compensated GPF), gpf-mm and gpf-ladder (= gpf), spf (bootstrap PF), ekf, ukf or enkf.", choices=FILTERS, checked_by=_BY_FILTER),
         Spec("n_particles", N_PARTICLES, "Number of particles / ensemble members (gpf, spf, enkf); >= 2 for enkf.", bounds=">= 1", symbol="N", checked_by=_BY_FILTER),
         Spec("seed", 0, "Seed of the filter's random stream; negative: a random seed."),
         Spec("reference", "innovation", "GPF projection reference; increment needs metric euclidean or process_noise.", choices=REFERENCES, checked_by=_BY_FILTER),

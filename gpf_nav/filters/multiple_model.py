@@ -9,9 +9,10 @@ against a compensation sized for the paper's 9 % gravity mismatch, 0.13 m/s^2); 
 cannot be followed. :class:`MultipleModelGPF` tests the hypotheses instead of assuming one: filters run in
 parallel, one on the user's model (``nominal``) and one per compensation scale, with
 ``sigma_j = compensation_scales[j] * unmodelled_acceleration_std`` and correlation time
-``tau_j = compensation_times[j] * unmodelled_acceleration_time``: by default two compensated members, 1e-2
-and 0.1 m/s^2 with 1e4 and 1e6 s, so that a thrust of a few mm/s^2 that turns and a mismatch up to 0.2
-m/s^2 each have a member of their size, or between two members is the wider one's (step 5). A Markov chain
+``tau_j = compensation_times[j] * unmodelled_acceleration_time``: by default two compensated members, 2e-3
+m/s^2 with 400 s and 0.1 m/s^2 with 1e6 s, so that a force of a few mm/s^2 that changes along the orbit
+and a mismatch up to 0.2 m/s^2 each have a member of their size, or between two members is the wider
+one's (step 5). A Markov chain
 switches between the ``K`` models with mean sojourn ``switch_time``, a switch going to each other model
 alike.
 
@@ -90,7 +91,7 @@ Each cycle is Blom's interacting multiple model (IMM):
    wider member's size: a force beyond about two of a member's sigmas lies inside the next member's
    prior. Without the gate a member too small for the force can still win the evidence (it follows the
    measured part of the force with a shrunk, lagging acceleration) and turn the rest into an error where
-   the data are weakest: a 2 % gravity mismatch (0.03 m/s^2) without azimuth, where the 1e-2 m/s^2
+   the data are weakest: a 2 % gravity mismatch (0.03 m/s^2) without azimuth, where a 1e-2 m/s^2
    member, its acceleration beyond two of its sigmas, won against the widest member.
 
 The estimate is the mixture ``sum_j mu_j N(m_j, P_j)`` (mean and covariance of the user's state); the
@@ -134,28 +135,32 @@ NOMINAL_SWITCH_TIME = 0.0
 as the chain's other switches; module docstring). Across a long gap in the data the narrowest member
 carries the acceleration it learnt from noise (two surface beacons 1 400 s apart), which the nominal
 member's white acceleration does not."""
-COMPENSATION_SCALES = (0.1, 1.0)
+COMPENSATION_SCALES = (0.02, 1.0)
 """Default compensation scales: the compensated members' ``sigma`` as fractions of
-``unmodelled_acceleration_std`` (module docstring): with its default 0.1 m/s^2, members of 1e-2 and 0.1
-m/s^2, so that a thrust of a few mm/s^2 and the paper's 9 % mismatch (0.13 m/s^2) each have a member of
-their size; forces below them are the nominal member's white acceleration's. A force between two members
-(a 2 % gravity mismatch, 0.03 m/s^2) is the wider one's: the size gate (step 5) refuses the narrower one,
-whose estimate says the force is beyond its prior. A member of 0.03 m/s^2 between them, an EKF, won the
-evidence against that force without azimuth, honest but with 1.22 times the widest GPF member's position
-error (the EKF's linearisation across a cloud kilometres wide); as a GPF it would cost a third GPF member.
-A member of 1e-3 m/s^2 for the Moon's J2 carried the acceleration it learnt from noise across long gaps
-in the data."""
-COMPENSATION_TIMES = (0.01, 1.0)
+``unmodelled_acceleration_std`` (module docstring): with its default 0.1 m/s^2, members of 2e-3 and 0.1
+m/s^2, so that a force of a few mm/s^2 that changes along the orbit and the paper's 9 % mismatch (0.13
+m/s^2) each have a member of their size; forces below them are the nominal member's white acceleration's.
+A force between two members (a 5 mm/s^2 thrust, a 0.02 m/s^2 drag, a 2 % gravity mismatch of 0.03 m/s^2)
+is the wider one's: the size gate (step 5) refuses the narrower one, whose estimate says the force is
+beyond its prior. A member of 0.03 m/s^2 between them, an EKF, won the evidence against that force
+without azimuth, honest but with 1.22 times the widest GPF member's position error (the EKF's
+linearisation across a cloud kilometres wide); as a GPF it would cost a third GPF member. A member of
+1e-3 m/s^2 and 2e4 s carried the acceleration it learnt from noise across long gaps in the data."""
+COMPENSATION_TIMES = (0.0004, 1.0)
 """Default correlation times of the compensated members as fractions of ``unmodelled_acceleration_time``
-(with its default 1e6 s: 1e4 and 1e6 s). A force of size ``sigma`` changes by about
-``sigma sqrt(2 T / tau)`` over a time ``T``: the 1e-2 member follows a thrust that turns, the widest one
-learns a constant mismatch and keeps it. No member's acceleration may change faster than the widest
-member's, ``2 sigma^2 / tau`` (the intensity of its driving noise: 2e-8 m^2/s^5 for both), so that the
-widest model contains every other in pace as well as in size (step 4). A faster member (1e-2 m/s^2 at 2e3
-s, five times the widest's pace) is wider than the widest along a direction no measurement sees: without
-azimuth its state wanders there, its estimate stays inside the widest member's gate, and it wins the
-evidence by predicting the next measurement well (an unmodelled drag in Case 2: 1.40 times the position
-error)."""
+(with its default 1e6 s: 400 s and 1e6 s). A force of size ``sigma`` changes by about
+``sigma sqrt(2 T / tau)`` over a time ``T``: the narrow member follows a force that changes along the
+orbit, the widest one learns a constant mismatch and keeps it. Both change at the same pace,
+``2 sigma^2 / tau`` (the intensity of the driving noise: 2e-8 m^2/s^5), so that the widest model contains
+every other in pace as well as in size (step 4). Where no measurement sees a direction (no azimuth), a
+narrow member's acceleration is also what it makes of the error in its state there, and it wins the
+evidence by predicting the next measurement well while that state is wrong. A faster member wanders
+along that direction inside the widest member's gate (1e-2 m/s^2 at 1e3 s, ten times the widest's pace:
+an unmodelled drag in Case 2, 1.42 times the position error); a slower one keeps an acceleration fitted
+to an early error for thousands of seconds (1e-2 m/s^2 at 1e4 s, under J2 without azimuth: a run whose
+prior error lay at the 1 % tail of its distribution, 2.9 km against the EKF's 260 m, 7 km off for 2 000
+s). A small member of short time holds such an acceleration for minutes, and it moves the state by
+little."""
 NESTING_GATE = 0.999
 """Probability of the chi-square gate by which the widest member's posterior must admit a narrower
 member's estimate for that member to keep its probability, while the data leave a direction undetermined
@@ -164,9 +169,9 @@ member explains the error left there with a wrong state and wins the evidence.""
 SIZE_GATE = 0.8
 """Probability of the size gate (step 5 of the module docstring; 0: no gate): a narrow member whose estimated
 acceleration lies beyond this quantile of its own prior (``a^T a / sigma^2 > chi^2_p``, 2.15 sigmas for
-``p = 3``) is refused. Members of the force's size keep theirs well inside it (a thrust of 5 mm/s^2 at 0.5 of
-the 1e-2 m/s^2 member's sigma); at 0.99 (3.4 sigmas) the gate never fires against a 2 % gravity mismatch
-(0.03 m/s^2), and the 1e-2 m/s^2 member, its acceleration shrunk and lagging, keeps winning there."""
+``p = 3``) is refused. Members of the force's size keep theirs well inside it; at 0.99 (3.4 sigmas) the gate
+never fired against a 2 % gravity mismatch (0.03 m/s^2), and a 1e-2 m/s^2 member, its acceleration shrunk
+and lagging, kept winning there."""
 NESTING_SPREAD = 0.5
 """Fraction of the nominal member's variance along each undetermined direction below which a narrow
 compensated member is refused by the nesting gate (step 4 of the module docstring). The bound of exact
