@@ -12,9 +12,8 @@ parallel, one on the user's model (``nominal``) and one per compensation scale, 
 ``tau_j = compensation_times[j] * unmodelled_acceleration_time``: by default two compensated members, 2e-3
 m/s^2 with 400 s and 0.1 m/s^2 with 1e6 s, so that a force of a few mm/s^2 that changes along the orbit
 and a mismatch up to 0.2 m/s^2 each have a member of their size, or between two members is the wider
-one's (step 5). A Markov chain
-switches between the ``K`` models with mean sojourn ``switch_time``, a switch going to each other model
-alike.
+one's (step 5). A Markov chain switches between the ``K`` models with mean sojourn ``switch_time``, a
+switch going to each other model alike.
 
 **Forces below every member's size.** That no force acts is never established by the data: a force far
 below the measurements' noise (the Moon's J2, 4.6e-4 m/s^2, seen in range, azimuth and elevation) changes
