@@ -111,17 +111,42 @@ def _ranges(model, x, lags):
 
 
 @pytest.mark.parametrize("lags", [(), (50.0, 100.0)])
-def test_the_flattened_coordinates_make_the_ranges_now_and_ahead_linear(lags):
+def test_the_flattened_coordinates_make_the_ranges_now_and_ahead_linear(lags, monkeypatch):
     """In the flattened coordinates each stacked row is exactly its linearisation at the cloud's mean: the
-    map back of ``xi`` measures ``g(m) + J (xi - m)``, now and at every lag."""
+    map back of ``xi`` measures ``g(m) + J (xi - m)``, now and at every lag. The 20 km cloud's rows ahead are
+    beyond the second order, so they are flowed even where the second order would be taken."""
+    monkeypatch.setattr(flattening_module, "SECOND_ORDER", 0)
     _, model, x, weights = _range_only_cloud()
     rows = np.array([True, False, False])
     flat, xi = flattening(x, weights, rows, ModelSensor(model), model, 0.0, None, lags, model.state_dim)
     back = flat.unflatten(xi)
     np.testing.assert_allclose(back, x, rtol=0, atol=1e-3)  # (m and m/s: the round trip)
     linear = [flat.measured[0] + (xi.T - flat.mean) @ flat.jacobian[0]]
-    linear += [measured[0] + (xi.T - flat.mean) @ jacobian[0] for measured, jacobian in flat.ahead]
+    if lags:
+        assert flat.ahead.hessians is None
+        linear += [measured[0] + (xi.T - flat.mean) @ jacobian[0] for measured, jacobian in flat.ahead.ahead]
     np.testing.assert_allclose(_ranges(model, back, lags), np.column_stack(linear), rtol=0, atol=0.05)
+
+
+def test_a_cloud_a_kilometre_wide_takes_its_rows_ahead_to_second_order(monkeypatch):
+    """The 20 km cloud shrunk to 1 km: its ranges 50 and 100 s ahead are quadratic about the mean, so from
+    SECOND_ORDER particles the flattening takes them to second order without flowing the cloud, and the map
+    back's ranges ahead are their linearisation to within FLAT_ENOUGH of the noise (the exact flow of every
+    particle, above, to 5 cm). Below SECOND_ORDER particles the cloud is flowed."""
+    config, model, x, weights = _range_only_cloud()
+    mean = (x @ weights)[:, None]
+    x = np.ascontiguousarray(mean + (x - mean) / 20.0)
+    rows, lags = np.array([True, False, False]), (50.0, 100.0)
+    flat, _ = flattening(x, weights, rows, ModelSensor(model), model, 0.0, None, lags, model.state_dim)
+    assert flat.ahead.hessians is None
+    monkeypatch.setattr(flattening_module, "SECOND_ORDER", x.shape[1])
+    flat, xi = flattening(x, weights, rows, ModelSensor(model), model, 0.0, None, lags, model.state_dim)
+    assert flat.ahead.hessians is not None
+    back = flat.unflatten(xi)
+    np.testing.assert_allclose(back, x, rtol=0, atol=1e-3)
+    linear = [measured[0] + (xi.T - flat.mean) @ jacobian[0] for measured, jacobian in flat.ahead.ahead]
+    missed = np.abs(_ranges(model, back, lags)[:, 1:] - np.column_stack(linear)).max()
+    assert missed < FLAT_ENOUGH * config.range_noise_std, missed
 
 
 def test_a_cloud_that_curves_by_less_than_flat_enough_is_left_in_the_state_coordinates():

@@ -21,7 +21,7 @@ from gpf_nav.linalg import positive_definite
 from gpf_nav.kernels import (VECTOR_MATH, bearing, cloud, covariance, diagonal_projection, information, log_weights,
                              orbit)
 from gpf_nav.kernels import curvature as curvature_kernels
-from gpf_nav.kernels.curvature import departure, largest_scaled
+from gpf_nav.kernels.curvature import departure, largest_scaled, quadratic_departure
 from gpf_nav.kernels.systematic import systematic_ancestors
 from gpf_nav.models.compensation import ModelErrorCompensation
 from gpf_nav.models.lunar import MU_MOON, LunarDescentModel
@@ -353,6 +353,31 @@ def test_the_flattening_departures_are_the_numpy_ones(count):
         parallel = np.empty((count, 3))
         curvature_kernels._departure_parallel(residual, x, mean, jacobian, parallel, 0)
         np.testing.assert_array_equal(parallel, serial)
+
+
+
+@pytest.mark.parametrize("count", SIZES)
+def test_the_second_order_departures_are_the_numpy_ones(count):
+    """``d^T T_c d / 2`` of every particle for each symmetric ``T_c``, into columns of a wider array, to
+    rounding; serial and parallel loops alike bit for bit."""
+    rng = np.random.default_rng(120 + count)
+    x, _ = _cloud(rng, 9, count)
+    mean = x.mean(axis=1)
+    hessians = rng.standard_normal((4, 9, 9))
+    hessians += hessians.transpose(0, 2, 1)
+    d = x.T - mean
+    expected = 0.5 * np.einsum("ni,cij,nj->nc", d, hessians, d)
+    scale = np.einsum("ni,cij,nj->nc", np.abs(d), np.abs(hessians), np.abs(d)).max()
+    out = np.full((count, 8), np.nan)
+    quadratic_departure(x, mean, hessians, out, 2)
+    _close(out[:, 2:6], expected, atol=1e-13 * scale)
+    assert np.isnan(out[:, :2]).all() and np.isnan(out[:, 6:]).all()
+    upper = np.ascontiguousarray(np.triu(hessians, 1) + 0.5 * np.diagonal(hessians, axis1=1, axis2=2)[:, :, None]
+                                 * np.eye(9))
+    serial, parallel = np.empty((count, 4)), np.empty((count, 4))
+    curvature_kernels._quadratic_serial(x, mean, upper, serial, 0)
+    curvature_kernels._quadratic_parallel(x, mean, upper, parallel, 0)
+    np.testing.assert_array_equal(parallel, serial)
 
 
 class _WithoutFastPath(LunarDescentModel):

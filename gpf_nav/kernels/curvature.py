@@ -73,3 +73,60 @@ def largest_scaled(nu: np.ndarray, previous: np.ndarray, scale: np.ndarray) -> f
     for k in range(largest.size):  # (not largest.max(): compiling numpy's reduction takes a second)
         result = largest[k] if largest[k] > result else result
     return result
+
+
+@njit(cache=True, error_model="numpy", fastmath={"contract"})
+def _quadratic_block(x, mean, upper, out, column, start, offsets, totals):
+    """:func:`quadratic_departure` of the particles ``start`` to ``start + CHUNK``: the offsets from the
+    mean into the first ``n`` rows of ``offsets`` ``(n + 1, CHUNK)``, then, pair of components by pair,
+    their product into its last row and that product into every row's sum, ``totals`` ``(R, CHUNK)``."""
+    size = min(totals.shape[1], x.shape[1] - start)
+    n, rows = x.shape[0], upper.shape[0]
+    for a in range(n):
+        values, centre, offset = x[a, start:start + size], mean[a], offsets[a]
+        for t in range(size):
+            offset[t] = values[t] - centre
+    for c in range(rows):
+        total = totals[c]
+        for t in range(size):
+            total[t] = 0.0
+    product = offsets[n]
+    for a in range(n):
+        first = offsets[a]
+        for b in range(a, n):
+            second = offsets[b]
+            for t in range(size):
+                product[t] = first[t] * second[t]
+            for c in range(rows):
+                coefficient, total = upper[c, a, b], totals[c]
+                for t in range(size):
+                    total[t] += coefficient * product[t]
+    for c in range(rows):
+        departures, total = out[start:start + size, column + c], totals[c]
+        for t in range(size):
+            departures[t] = total[t]
+
+
+@njit(cache=True, error_model="numpy")
+def _quadratic_serial(x, mean, upper, out, column):
+    offsets, totals = np.empty((x.shape[0] + 1, CHUNK)), np.empty((upper.shape[0], CHUNK))
+    for start in range(0, x.shape[1], CHUNK):
+        _quadratic_block(x, mean, upper, out, column, start, offsets, totals)
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def _quadratic_parallel(x, mean, upper, out, column):
+    for block in prange((x.shape[1] + CHUNK - 1) // CHUNK):
+        _quadratic_block(x, mean, upper, out, column, block * CHUNK, np.empty((x.shape[0] + 1, CHUNK)),
+                         np.empty((upper.shape[0], CHUNK)))
+
+
+def quadratic_departure(x: np.ndarray, mean: np.ndarray, hessians: np.ndarray, out: np.ndarray,
+                        column: int) -> None:
+    """Write into the columns ``column`` to ``column + R`` of ``out`` ``(N, K)`` the second-order departures
+    ``d^T T_c d / 2`` of the particles ``x`` ``(n, N)`` (C-contiguous), ``d = x - mean``, for each symmetric
+    ``T_c`` of ``hessians`` ``(R, n, n)``: a sum over the ``n (n + 1) / 2`` pairs of components, each pair's
+    product formed once for every row. On every core from :data:`~gpf_nav.kernels.PARALLEL` particles."""
+    upper = np.triu(hessians, 1) + 0.5 * np.diagonal(hessians, axis1=1, axis2=2)[:, :, None] * np.eye(mean.size)
+    kernel = _quadratic_parallel if x.shape[1] >= PARALLEL else _quadratic_serial
+    kernel(x, mean, np.ascontiguousarray(upper), out, column)
