@@ -63,8 +63,8 @@ SECOND_ORDER = 4_096
 """Particles from which the flattening takes the rows ahead to second order about the cloud's mean instead of
 flowing every particle (:func:`_rows_ahead`): the second derivatives cost a flow of a few dozen states and
 their Jacobians, which a cloud of a few thousand particles' flows cost too (at 4 000 particles the default's
-step took 0.99 times as long either way, at 10 000 0.80 times, at 100 000 0.73 times). Below it, nothing
-changes."""
+step took 0.99 times as long either way, at 10 000 0.8 to 0.95 times, at 100 000 0.73 times, in paired runs of
+the descent's first minutes). Below it, nothing changes."""
 _NONE = np.zeros((0, 0))
 """No previous curvature (:func:`~gpf_nav.kernels.curvature.largest_scaled`)."""
 
