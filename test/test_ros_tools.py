@@ -54,6 +54,8 @@ def test_latency_benchmark_small(private_domain):
     assert len(rows) == 1 and rows[0]["particles"] == 200 and rows[0]["rate_hz"] == 20.0
     # figures, not limits (a busy machine sheds input and stretches latency): measured and consistent
     assert 0 < rows[0]["answered"] <= 1 and 0 < rows[0]["p50_ms"] <= rows[0]["p99_ms"]
+    # the estimator's own time per measurement, from its diagnostics
+    assert 0 < rows[0]["node_mean_ms"] <= rows[0]["node_max_ms"]
     # the IMU samples sent before each measurement reached the estimator (its diagnostics count them)
     assert rows[0]["imu_per_measurement"] == 2 and 0 < rows[0]["imu_accepted"] <= 2 * (5 + 30)
     assert 0 <= rows[0]["late_imu_applied"] <= rows[0]["imu_accepted"]

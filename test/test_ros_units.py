@@ -429,6 +429,44 @@ def test_the_message_layer_logs_a_silent_imu_once_per_throttle_period():
         "no IMU sample for 3.0 s (imu_timeout 1 s): predicting without input"]
 
 
+def test_the_message_layer_reports_its_processing_time_per_diagnostics_period():
+    """Each measurement message is timed from its callback to its outputs; ``/diagnostics`` gives the
+    count, mean and max of the period, then starts a new one (a test clock: 2 ms, then 5 ms)."""
+    pytest.importorskip("rclpy")
+    from gpf_nav.estimator.params import ESTIMATOR
+    from gpf_nav.ros.conversions import vector3_stamped
+    from gpf_nav.ros.diagnostics import parse_values
+    from gpf_nav.ros.message_layer import MessageLayer
+    from gpf_nav.ros.processing_time import ProcessingTime
+
+    class Log:
+        def info(self, line):
+            pass
+        warning = error = info
+
+    s = generate(SHORT, 3)
+    params = {spec.name: spec.default for spec in ESTIMATOR}
+    params.update(initial_state=list(s.prior_mean), initial_std=list(np.sqrt(np.diag(s.prior_cov))),
+                  initial_stamp=_stamp(s, 0) * 1e-9 - 1.0, n_particles=100)
+    published = []
+    layer = MessageLayer(params, lambda topic, msg: published.append((topic, msg)), Log())
+    layer.processing = ProcessingTime(iter([0.0, 0.002, 1.0, 1.005]).__next__)
+    for k in range(2):
+        layer.handle("rae", vector3_stamped(s.measurements[k], _stamp(s, k), "station"), _stamp(s, k))
+    assert any(topic == "odometry/filtered" for topic, _ in published)  # (the messages were processed)
+
+    def diagnostics(now_ns):
+        layer.diagnostics_tick(now_ns, 1.0, "gpf_estimator")
+        return parse_values([msg for topic, msg in published if topic == "/diagnostics"][-1].status[0])
+
+    values = diagnostics(_stamp(s, 1))
+    assert values["measurements timed"] == "2"
+    assert float(values["measurement processing mean [ms]"]) == pytest.approx(3.5)
+    assert float(values["measurement processing max [ms]"]) == pytest.approx(5.0)
+    values = diagnostics(_stamp(s, 1) + S)
+    assert values["measurements timed"] == "0" and values["measurement processing max [ms]"] == "n/a"
+
+
 # --- simulator schedule ------------------------------------------------------------------------------
 def test_playback_is_deterministic_and_ordered():
     cfg = ScenarioConfig(duration=20.0, case="partial")

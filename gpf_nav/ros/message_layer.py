@@ -30,6 +30,7 @@ from std_msgs.msg import Float64
 
 from gpf_nav.ros import conversions as conv
 from gpf_nav.ros import diagnostics as diag
+from gpf_nav.ros.processing_time import ProcessingTime
 from gpf_nav.estimator import input_checks as val
 from gpf_nav.estimator.engine import EngineConfig, EstimatorEngine
 from gpf_nav.estimator.factory import make_filter, make_lunar_model
@@ -150,6 +151,7 @@ class MessageLayer:
         self._integrity_level = "OK"
         self._last_published_ns: int | None = None
         self._last_now_ns = 0
+        self.processing = ProcessingTime()   # wall time per measurement message, per diagnostics period
         self.time_jumps = 0                   # backward jumps of the node clock seen
 
     def describe(self) -> str:
@@ -187,7 +189,9 @@ class MessageLayer:
         self._watch_clock(now_ns)
         try:
             if stream in self.streams:
+                started = self.processing.start()
                 self._on_measurement(self.streams[stream], msg, now_ns)
+                self.processing.stop(started)
             else:
                 self._handlers[stream](msg, now_ns)
         except Exception as err:  # noqa: BLE001 - the last-resort net: the estimator goes on
@@ -459,6 +463,7 @@ class MessageLayer:
         level, message, values = diag.filter_status(self.engine, now_ns, self.thresholds, self.filter_name,
                                                     uptime=uptime)
         values.append(("node clock jumps back", str(self.time_jumps)))
+        values += self.processing.period_values()
         self.publish("/diagnostics", diag.to_msg(level, message, values, conv.ns_to_stamp(now_ns),
                                                  hardware_id=hardware_id))
         if not self.engine.initialized and self._throttled("_not_initialized"):

@@ -15,7 +15,10 @@ in this process. Reported per rate: p50, p99, max, the fraction of measurements 
 that grows shows as a large positive value; a full best-effort queue sheds messages instead, which
 shows as ``answered`` < 1). With ``--imu-per-measurement K`` each measurement is preceded by K ``imu``
 samples (zero specific force, stamped in the 0.1 s before it), as an IMU-driven node receives them; the
-estimator's ``late IMU samples applied`` and ``accepted imu`` counters are then reported too.
+estimator's ``late IMU samples applied`` and ``accepted imu`` counters are then reported too. ``node mean``
+and ``node max`` are the estimator's own wall time per measurement (its ``measurement processing``
+diagnostics, :mod:`gpf_nav.ros.processing_time`) over the rate's diagnostics periods: the share of the
+latency that is the node's, the rest being transport and this process's executor.
 """
 from __future__ import annotations
 
@@ -85,6 +88,7 @@ class _Bench:
         node.create_subscription(Odometry, "odometry/filtered", self._on_odom, 100)
         node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
         self.diagnostics: dict[str, str] = {}
+        self.periods: list[tuple[int, float, float]] = []  # (measurements, mean ms, max ms) per diagnostics
         self.imu_per_measurement = imu_per_measurement
         self._imu = Imu()
         self._imu.header.frame_id = "base_link"
@@ -101,6 +105,20 @@ class _Bench:
         for status in msg.status:
             if status.name == STATUS_NAME:
                 self.diagnostics = parse_values(status)
+                timed = int(self.diagnostics.get("measurements timed", 0))
+                if timed:
+                    self.periods.append((timed, float(self.diagnostics["measurement processing mean [ms]"]),
+                                         float(self.diagnostics["measurement processing max [ms]"])))
+
+    def node_time(self, first: int) -> dict:
+        """The estimator's own processing time per measurement over the diagnostics periods from ``first``
+        (:mod:`gpf_nav.ros.processing_time`): mean and max, ms."""
+        periods = self.periods[first:]
+        count = sum(n for n, _, _ in periods)
+        if not count:
+            return {}
+        return {"node_mean_ms": round(sum(n * mean for n, mean, _ in periods) / count, 3),
+                "node_max_ms": round(max(longest for _, _, longest in periods), 3)}
 
     def send(self, stamp_ns: int, y) -> None:
         from gpf_nav.ros.conversions import ns_to_stamp, vector3_stamped
@@ -208,6 +226,7 @@ def _run_one(context, env, scenario, n, rates, counts, args) -> list[dict]:
             items = [(stamps[cursor + i], scenario.measurements[cursor + i]) for i in range(count)
                      if np.any(np.isfinite(scenario.measurements[cursor + i]))]
             cursor += count
+            first_period = len(bench.periods)
             thread = threading.Thread(target=_pace, args=(bench, items, rate, stop), daemon=True)
             thread.start()
             while thread.is_alive():
@@ -218,6 +237,7 @@ def _run_one(context, env, scenario, n, rates, counts, args) -> list[dict]:
             if label != "warmup":
                 row = {"filter": args.filter, "particles": n, "rate_hz": rate}
                 row.update(_stats(bench, [s for s, _ in items]))
+                row.update(bench.node_time(first_period))
                 if args.imu_per_measurement:  # the counters so far (cumulative over the rates)
                     row.update(imu_per_measurement=args.imu_per_measurement,
                                imu_accepted=int(bench.diagnostics.get("accepted imu", -1)),
@@ -237,13 +257,14 @@ def _run_one(context, env, scenario, n, rates, counts, args) -> list[dict]:
 
 def format_table(results: list[dict]) -> str:
     head = f"{'filter':6} {'N':>6} {'rate':>6} {'sent':>5} {'answered':>8} {'p50 ms':>8} {'p99 ms':>8} " \
-           f"{'max ms':>8} {'growth ms':>9}"
+           f"{'max ms':>8} {'growth ms':>9} {'node mean':>9} {'node max':>8}"
     lines = [head, "-" * len(head)]
     for r in results:
         lines.append(f"{r['filter']:6} {r['particles']:>6} {r['rate_hz']:>6g} {r['sent']:>5} "
                      f"{r['answered']:>8.3f} {r.get('p50_ms', float('nan')):>8.2f} "
                      f"{r.get('p99_ms', float('nan')):>8.2f} {r.get('max_ms', float('nan')):>8.2f} "
-                     f"{r.get('backlog_growth_ms', float('nan')):>9.2f}"
+                     f"{r.get('backlog_growth_ms', float('nan')):>9.2f} {r.get('node_mean_ms', float('nan')):>9.2f} "
+                     f"{r.get('node_max_ms', float('nan')):>8.2f}"
                      + (f"   IMU {r['imu_per_measurement']}/measurement: {r['imu_accepted']} accepted, "
                         f"{r['late_imu_applied']} late" if "imu_per_measurement" in r else ""))
     return "\n".join(lines)
