@@ -7,7 +7,9 @@ navigation-grade GPF of N particles on the compensated model, ``spf`` the bootst
 diagnostic co-state, and ``particles`` N. Chopin's bootstrap filter on the same model when that library is installed
 (:mod:`gpf_nav.experiments.peer_particles`; skipped otherwise).
 Each filter runs on the same seeded lunar-descent measurements, each step on the next measurement. A step
-is timed over a block of steps. The filters of one group (the particle filters of one N; the Gaussian
+is timed over a block of steps; after each block, untimed, the estimate is compared with the truth, so a
+filter's time comes with its position and velocity errors (RMS over the blocks' ends), its mean NEES and
+its worst position error in the same steps: a speed bought with a wrong estimate shows. The filters of one group (the particle filters of one N; the Gaussian
 filters and the EnKF) run their blocks in turn, round after round, the order rotating each round, so a
 machine whose speed drifts (other work, CPU frequency) moves every filter of the group alike. The
 reported figure is a filter's median block time per step over ``--repeats`` rounds, after a warm-up; the
@@ -26,6 +28,7 @@ import json
 import os
 import platform
 import time
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -33,6 +36,7 @@ import numpy as np
 from gpf_nav import allocator, registry
 from gpf_nav.arguments import CommandParser, non_negative_int, positive_int
 from gpf_nav.experiments import peer_particles
+from gpf_nav.experiments.metrics import nees_step, rmse
 from gpf_nav.experiments.peer_particles import ParticlesBootstrap
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 
@@ -84,12 +88,13 @@ STEPS = 50
 LARGE_STEPS = 2
 
 
-def time_filters(makers, scenario, model, steps: int, repeats: int,
-                 warmup: int = WARMUP) -> list[list[float]]:
+def time_filters(makers, scenario, model, steps: int, repeats: int, warmup: int = WARMUP,
+                 after_block: Callable[[int, object, int], None] | None = None) -> list[list[float]]:
     """Seconds per predict+update step of each filter made by ``makers`` (``constructor(model, seed)``), one
     list of ``repeats`` block times each: the filters run blocks of ``steps`` steps in turn, round after
     round, the first of a round rotating. Each filter's step takes the scenario's next measurement (so it
-    runs in its normal regime, tracking the truth)."""
+    runs in its normal regime, tracking the truth). ``after_block(i, filter, k)``, untimed, follows each
+    block of filter ``i`` that ended with its estimate of ``scenario.truth[k]``."""
     if warmup + repeats * steps > len(scenario.measurements):
         raise ValueError(f"the scenario has {len(scenario.measurements)} measurements, the timing needs "
                          f"{warmup + repeats * steps}")
@@ -111,7 +116,25 @@ def time_filters(makers, scenario, model, steps: int, repeats: int,
                 f.predict(dt)
                 f.update(ys[k])
             blocks[i].append((time.perf_counter() - start) / steps)
+            if after_block is not None:
+                after_block(i, f, first + steps)
     return blocks
+
+
+def estimate_errors(f, truth: np.ndarray) -> tuple[float, float, float]:
+    """``(position error m, velocity error m/s, NEES)`` of the filter ``f``'s estimate of ``truth`` ``(6,)``
+    (the lunar state: position then velocity)."""
+    error = np.asarray(f.mean, dtype=float)[:6] - truth
+    return (float(np.linalg.norm(error[:3])), float(np.linalg.norm(error[3:6])),
+            nees_step(error, np.asarray(f.covariance, dtype=float)[:6, :6]))
+
+
+def accuracy(ends: list[tuple[float, float, float]]) -> dict:
+    """The figures of a filter's :func:`estimate_errors` at its block ends: position and velocity RMS, mean
+    NEES, worst position error."""
+    position, velocity, nees = (np.array(column) for column in zip(*ends))
+    return {"position_rms_m": rmse(position), "velocity_rms_m_s": rmse(velocity),
+            "nees_mean": float(np.mean(nees)), "position_worst_m": float(np.max(position))}
 
 
 def time_filter(make, scenario, model, steps: int, repeats: int, warmup: int = WARMUP) -> float:
@@ -122,7 +145,7 @@ def time_filter(make, scenario, model, steps: int, repeats: int, warmup: int = W
 def run(particle_counts=PARTICLE_COUNTS, repeats: int = 15, seed: int = 0, filters=FILTERS,
         warmup: int = WARMUP) -> dict:
     """Benchmark ``filters`` (registry names) after ``warmup`` untimed steps; returns ``{"results":
-    [{"filter", "particles", "us_per_step", "blocks_us" (per round)}, ...], "gpf_over_spf": {N: ratio}, ...
+    [{"filter", "particles", "us_per_step", "blocks_us" (per round), and :func:`accuracy`'s keys}, ...], "gpf_over_spf": {N: ratio}, ...
     (one key per :data:`RATIOS` entry, each empty unless both of its filters ran: those against
     ``particles`` without that library), "warmup": steps, "machine": ...}`` (module docstring)."""
     default = ScenarioConfig()
@@ -133,10 +156,12 @@ def run(particle_counts=PARTICLE_COUNTS, repeats: int = 15, seed: int = 0, filte
     for group in _groups(particle_counts, filters):
         n = max(count or 0 for _, count, _ in group)
         steps = STEPS if n <= 10_000 else 5 if n < LARGE else LARGE_STEPS
-        blocks = time_filters([make for _, _, make in group], scenario, model, steps, repeats, warmup)
-        for (name, count, _), times in zip(group, blocks):
+        ends: list[list[tuple[float, float, float]]] = [[] for _ in group]
+        blocks = time_filters([make for _, _, make in group], scenario, model, steps, repeats, warmup,
+                              lambda i, f, k: ends[i].append(estimate_errors(f, scenario.truth[k])))
+        for (name, count, _), times, errors in zip(group, blocks, ends):
             results.append({"filter": name, "particles": count, "us_per_step": float(np.median(times)) * 1e6,
-                            "blocks_us": [t * 1e6 for t in times]})
+                            "blocks_us": [t * 1e6 for t in times], **accuracy(errors)})
         by_name = {name: np.asarray(times) for (name, _, _), times in zip(group, blocks)}
         if _particle_filter(group[0][0]):
             for key, numerator, denominator in RATIOS:
@@ -154,12 +179,15 @@ _LABELS = {"gpf": "GPF", "spf": "SPF", "gpf-paper": "GPF-paper", PEER: "particle
 
 def format_table(report: dict) -> str:
     """A plain-text table of a :func:`run` report."""
-    lines = [f"{'filter':<10} {'N':>8} {'per step':>12}"]
+    lines = [f"{'filter':<10} {'N':>8} {'per step':>12} {'position m':>10} {'velocity m/s':>12} {'NEES':>7} "
+             f"{'worst m':>8}"]
     for r in report["results"]:
         n = "-" if r["particles"] is None else str(r["particles"])
         us = r["us_per_step"]
         shown = f"{us:9.1f} us" if us < 1000 else f"{us / 1000:9.2f} ms"
-        lines.append(f"{r['filter']:<10} {n:>8} {shown:>12}")
+        lines.append(f"{r['filter']:<10} {n:>8} {shown:>12} {r['position_rms_m']:>10.4g} "
+                     f"{r['velocity_rms_m_s']:>12.4g} {r['nees_mean']:>7.3g} {r['position_worst_m']:>8.4g}")
+    lines.append("position, velocity (RMS), NEES (mean) and worst position error: the estimates at the blocks' ends")
     lines.append(f"ratios (medians over rounds of blocks timed in turn, after {report['warmup']} steps):")
     for key, numerator, denominator in RATIOS:
         if report.get(key):

@@ -50,6 +50,11 @@ class ParticlesBootstrap:
     def mean(self) -> np.ndarray:
         return np.average(self._smc.X, axis=0, weights=self._smc.W)
 
+    @property
+    def covariance(self) -> np.ndarray:
+        """Weighted covariance ``(n, n)`` of the cloud."""
+        return np.cov(self._smc.X, rowvar=False, aweights=self._smc.W, bias=True)
+
     def _build(self):
         import particles
         from particles import distributions as dists
