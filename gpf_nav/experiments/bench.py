@@ -6,21 +6,22 @@ particles each, and a compensated EKF), ``gpf-paper`` the paper's, ``gpf-single`
 navigation-grade GPF of N particles on the compensated model, ``spf`` the bootstrap PF without its
 diagnostic co-state, and ``particles`` N. Chopin's bootstrap filter on the same model when that library is installed
 (:mod:`gpf_nav.experiments.peer_particles`; skipped otherwise).
-Each filter runs on the same seeded lunar-descent measurements, each step on the next measurement. A step
-is timed over a block of steps; after each block, untimed, the estimate is compared with the truth, so a
-filter's time comes with its position and velocity errors (RMS over the blocks' ends), its mean NEES and
-its worst position error in the same steps: a speed bought with a wrong estimate shows. The filters of one group (the particle filters of one N; the Gaussian
-filters and the EnKF) run their blocks in turn, round after round, the order rotating each round, so a
-machine whose speed drifts (other work, CPU frequency) moves every filter of the group alike. The
-reported figure is a filter's median block time per step over ``--repeats`` rounds, after a warm-up; the
-ratios (:data:`RATIOS`: GPF/SPF, GPF/GPF-paper, GPF/particles, SPF/particles, GPF-paper/particles) are the
-medians over the rounds of the ratio of the two blocks of a round. The warm-up is :data:`WARMUP` steps: the
-blocks then time the descent's first minutes, where the navigation-grade GPF's clouds are wide enough to be
-flattened at most updates; ``--warmup 300`` times the steady state that follows, where most updates skip
-it (``docs/filters.md``). ``gpf-nav bench`` runs with the heap
-tuning of :mod:`gpf_nav.allocator` and OpenMP's passive waits (:mod:`gpf_nav.openmp`; the report says
-whether each was applied); ``python -m gpf_nav.experiments.bench`` runs with the C library's default
-allocator and OpenMP's default policy, for comparison. ``--node`` runs the ROS node-latency benchmark instead (``gpf_nav.tools.latency``).
+Each filter runs on the same seeded lunar-descent measurements, each step on the next measurement. A step is
+timed over a block of steps; after each block, untimed, the estimate is compared with the truth, so a filter's
+time comes with its position and velocity errors (RMS over the blocks' ends), its mean NEES and its worst
+position error in the same steps: a speed bought with a wrong estimate shows. The filters of one group (the
+particle filters of one N; the Gaussian filters and the EnKF) run their blocks in turn, round after round, the
+order rotating each round, so a machine whose speed drifts (other work, CPU frequency) moves every filter of
+the group alike. The reported figure is a filter's median block time per step over ``--repeats`` rounds, after
+a warm-up; the ratios (:data:`RATIOS`: GPF/SPF, GPF/GPF-paper, GPF/particles, SPF/particles,
+GPF-paper/particles) are the medians over the rounds of the ratio of the two blocks of a round. The warm-up is
+:data:`WARMUP` steps: the blocks then time the descent's first minutes, where the navigation-grade GPF's
+clouds are wide enough to be flattened at most updates; ``--warmup 300`` times the steady state that follows,
+where most updates skip it (``docs/filters.md``).
+``gpf-nav bench`` runs with the heap tuning of :mod:`gpf_nav.allocator` and OpenMP's passive waits
+(:mod:`gpf_nav.openmp`; the report says whether each was applied); ``python -m gpf_nav.experiments.bench``
+runs with the C library's default allocator and OpenMP's default policy, for comparison. ``--node`` runs the
+ROS node-latency benchmark instead (``gpf_nav.tools.latency``).
 """
 from __future__ import annotations
 
@@ -144,10 +145,10 @@ def time_filter(make, scenario, model, steps: int, repeats: int, warmup: int = W
 
 def run(particle_counts=PARTICLE_COUNTS, repeats: int = 15, seed: int = 0, filters=FILTERS,
         warmup: int = WARMUP) -> dict:
-    """Benchmark ``filters`` (registry names) after ``warmup`` untimed steps; returns ``{"results":
-    [{"filter", "particles", "us_per_step", "blocks_us" (per round), and :func:`accuracy`'s keys}, ...], "gpf_over_spf": {N: ratio}, ...
-    (one key per :data:`RATIOS` entry, each empty unless both of its filters ran: those against
-    ``particles`` without that library), "warmup": steps, "machine": ...}`` (module docstring)."""
+    """Benchmark ``filters`` (registry names) after ``warmup`` untimed steps; returns ``{"results": [{"filter",
+    "particles", "us_per_step", "blocks_us" (per round), and :func:`accuracy`'s keys}, ...], "gpf_over_spf":
+    {N: ratio}, ... (one key per :data:`RATIOS` entry, each empty unless both of its filters ran: those
+    against ``particles`` without that library), "warmup": steps, "machine": ...}`` (module docstring)."""
     default = ScenarioConfig()
     config = replace(default, duration=default.dt * (warmup + repeats * STEPS + 1))
     scenario = generate(config, seed)
