@@ -11,7 +11,7 @@ import pytest
 from gpf_nav.filters import GeometricProjectionPF
 import gpf_nav.filters.flattening as flattening_module
 from gpf_nav.estimator.factory import make_filter
-from gpf_nav.filters.flattening import FLAT_ENOUGH, MOVE_LIMIT, flattening
+from gpf_nav.filters.flattening import FLAT_ENOUGH, MOVE_LIMIT, OUTERMOST, flattening, outermost_curvature
 from gpf_nav.kernels.curvature import largest_scaled
 from gpf_nav.models import LinearGaussianModel
 from gpf_nav.sensors.model import ModelSensor
@@ -163,6 +163,40 @@ def test_a_cloud_that_curves_by_less_than_flat_enough_is_left_in_the_state_coord
     for factor, flattened in ((0.9, False), (1.1, True)):
         shrunk = np.ascontiguousarray(mean + np.sqrt(factor * FLAT_ENOUGH / curvature) * (x - mean))
         result = flattening(shrunk, weights, rows, ModelSensor(model), model, 0.0, None, lags, model.state_dim)
+        assert (result is not None) == flattened, factor
+
+
+def test_the_outermost_curvature_is_the_farthest_particles_of_a_fixed_fraction_of_the_cloud():
+    """Below two OUTERMOST particles the test takes the farthest particle; from there the (N // OUTERMOST)-th
+    farthest, so a few particles far out do not decide for the cloud; NaN anywhere is NaN."""
+    rng = np.random.default_rng(7)
+    scale = np.array([1.0, 2.0, 4.0])
+    small = rng.standard_normal((2 * OUTERMOST - 1, 3))
+    assert outermost_curvature(small, scale) == largest_scaled(small, np.zeros((0, 0)), scale)
+    nu = rng.standard_normal((10 * OUTERMOST, 3)) * 1e-3
+    nu[:9, 1] = 1.0  # nine particles far out: fewer than the ten outermost
+    assert outermost_curvature(nu, scale) == np.sort(np.abs(nu / scale).max(axis=1))[-10] < 1e-2
+    nu[9, 2] = 8.0  # the tenth
+    assert outermost_curvature(nu, scale) == 0.5
+    nu[-1, 0] = np.nan
+    assert np.isnan(outermost_curvature(nu, scale))
+
+
+def test_a_large_cloud_is_flattened_by_its_outermost_fraction_not_its_farthest_particle():
+    """A 2 000-particle range-only cloud shrunk so that its fourth-farthest particle curves by just under
+    FLAT_ENOUGH is left as it is, though its farthest particle curves by more; just over it, flattened."""
+    _, model, x, weights = _range_only_cloud(4 * OUTERMOST)
+    rows = np.array([True, False, False])
+    lags = (50.0, 100.0)
+    sensor = ModelSensor(model)
+    flat, _ = flattening(x, weights, rows, sensor, model, 0.0, None, lags, model.state_dim)
+    curvature = outermost_curvature(flat.curvature(x), flat.noise_std)
+    mean = (x @ weights)[:, None]
+    for factor, flattened in ((0.9, False), (1.1, True)):
+        shrunk = np.ascontiguousarray(mean + np.sqrt(factor * FLAT_ENOUGH / curvature) * (x - mean))
+        farthest = largest_scaled(flat.curvature(shrunk), np.zeros((0, 0)), flat.noise_std)
+        assert farthest > 1.1 * FLAT_ENOUGH
+        result = flattening(shrunk, weights, rows, sensor, model, 0.0, None, lags, model.state_dim)
         assert (result is not None) == flattened, factor
 
 

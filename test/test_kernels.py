@@ -21,7 +21,7 @@ from gpf_nav.linalg import positive_definite
 from gpf_nav.kernels import (VECTOR_MATH, bearing, cloud, covariance, diagonal_projection, information, log_weights,
                              orbit)
 from gpf_nav.kernels import curvature as curvature_kernels
-from gpf_nav.kernels.curvature import departure, largest_scaled, quadratic_departure
+from gpf_nav.kernels.curvature import departure, largest_scaled, quadratic_departure, scaled_by_particle
 from gpf_nav.kernels.systematic import systematic_ancestors
 from gpf_nav.models.compensation import ModelErrorCompensation
 from gpf_nav.models.lunar import MU_MOON, LunarDescentModel
@@ -331,6 +331,18 @@ def test_the_flattening_size_tests_are_the_numpy_ones(count):
     nu[-1, 4] = np.nan
     assert np.isnan(largest_scaled(nu, np.zeros((0, 0)), scale))
     assert np.isnan(largest_scaled(nu, previous, scale))
+
+
+@pytest.mark.parametrize("count", SIZES)
+def test_each_particles_scaled_curvature_is_the_numpy_one(count):
+    rng = np.random.default_rng(200 + count)
+    nu = rng.standard_normal((count, 9)) * rng.uniform(0.1, 10.0, 9)
+    scale = rng.uniform(0.1, 2.0, 9)
+    out = np.empty(count)
+    assert not scaled_by_particle(nu, scale, out)
+    np.testing.assert_array_equal(out, np.abs(nu / scale).max(axis=1))
+    nu[count // 2, 4] = np.nan
+    assert scaled_by_particle(nu, scale, out)
 
 
 @pytest.mark.parametrize("count", SIZES)

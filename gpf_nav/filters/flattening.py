@@ -30,11 +30,12 @@ map back solves ``x + K nu(x) = xi`` by :data:`ITERATIONS` fixed-point steps.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from gpf_nav.kernels.curvature import departure, largest_scaled, quadratic_departure
+from gpf_nav.kernels.curvature import departure, largest_scaled, quadratic_departure, scaled_by_particle
 from gpf_nav.models.state_space import StateSpaceModel
 from gpf_nav.sensors.sensor import Sensor
 
@@ -48,7 +49,15 @@ off by 3 %, below the Monte Carlo error of the weights at a few hundred particle
 linearisation is corrected by its exact weights; what flattening adds, the kernel's straight draws kept
 on the measurement's shells, matters for clouds kilometres wide (a large prior, range only), whose
 curvature is tenths of the noise and more. A cloud tracking the lunar descent in steady state curves by
-3e-3 to 3e-2 of the noise: most updates skip the flattening and its map back."""
+3e-3 to 3e-2 of the noise: most updates skip the flattening and its map back. The curvature tested is that
+of the cloud's outermost particles (:data:`OUTERMOST`)."""
+OUTERMOST = 500
+"""The cloud's outermost particles, whose curvature :func:`flattening` tests against :data:`FLAT_ENOUGH`, are its
+``N // OUTERMOST`` farthest out by it (below ``2 OUTERMOST`` particles the farthest one). The farthest particle of a
+cloud moves out as ``N`` grows (about 3 standard deviations of a Gaussian cloud at 500 particles, 4.4 at 100 000: twice
+the curvature), so testing it would flatten a larger cloud of the same posterior more often, for particles of
+negligible weight; a fixed fraction makes the decision the posterior's, the one a cloud of :data:`OUTERMOST`
+particles takes by its farthest."""
 NEGLIGIBLE = 1e-3
 """Changes of the curvature, in measurement noise standard deviations, below which the map back has
 converged (:meth:`Flattening.unflatten`)."""
@@ -170,10 +179,11 @@ def flattening(x: np.ndarray, weights: np.ndarray, rows: np.ndarray, sensor: Sen
     """The flattened coordinates of the cloud ``x`` ``(n, N)`` with normalised ``weights`` ``(N,)`` for the
     measured ``rows`` ``(m,)`` of ``sensor`` at ``time``, flowed by ``model`` with the input ``u`` held to
     the increasing ``lags`` (s; none: the rows measured now only), moving the first ``user_dim``
-    components of the state only, and the cloud in them, ``xi`` ``(n, N)``. None when every particle's
-    curvature is below :data:`FLAT_ENOUGH` (the coordinates are then the state's own, to that accuracy),
-    the rows measured now are not of full rank at the mean, or anything is non-finite. The curvature is
-    tested before the gain is built: a cloud left as it is pays for one evaluation of it."""
+    components of the state only, and the cloud in them, ``xi`` ``(n, N)``. None when the curvature of its
+    outermost particles (:func:`outermost_curvature`) is below :data:`FLAT_ENOUGH` (the coordinates are then
+    the state's own, to that accuracy), the rows measured now are not of full rank at the mean, or anything
+    is non-finite. The curvature is tested before the gain is built: a cloud left as it is pays for one
+    evaluation of it."""
     mean = np.einsum("in,n->i", x, weights)
     h, H = sensor.measure_and_jacobian(mean[None], time)
     h, H = h[0], H[0]
@@ -187,7 +197,7 @@ def flattening(x: np.ndarray, weights: np.ndarray, rows: np.ndarray, sensor: Sen
     gain = np.zeros((n, k * (1 + len(lags))))  # (written below, once the cloud is known to need it)
     flat = Flattening(mean, h, H, rows, gain, noise_std, ahead, float(time), sensor)
     nu = flat.curvature(x)
-    if not largest_scaled(nu, _NONE, noise_std) >= FLAT_ENOUGH:  # (NaN: nothing to flatten with)
+    if not outermost_curvature(nu, noise_std) >= FLAT_ENOUGH:  # (NaN: nothing to flatten with)
         return None
     now = H[rows][:, :user_dim]  # (k, n_user)
     try:
@@ -213,6 +223,19 @@ def flattening(x: np.ndarray, weights: np.ndarray, rows: np.ndarray, sensor: Sen
             ahead_gain.write(gain, keep)  # (the gain ``flat`` holds, rewritten in place)
             moves = gain @ nu.T
     return flat, x + moves
+
+
+def outermost_curvature(nu: np.ndarray, noise_std: np.ndarray) -> float:
+    """The curvature of the cloud's outermost particles (:data:`OUTERMOST`), in noise standard deviations: the
+    ``N // OUTERMOST``-th largest over the particles of ``max |nu / noise_std|`` (``nu`` ``(N, K)``,
+    ``noise_std`` ``(K,)``); NaN when any particle's is."""
+    count = nu.shape[0] // OUTERMOST
+    if count <= 1:
+        return largest_scaled(nu, _NONE, noise_std)
+    largest = np.empty(nu.shape[0])
+    if scaled_by_particle(nu, noise_std, largest):
+        return math.nan
+    return float(np.partition(largest, largest.size - count)[largest.size - count])
 
 
 def _rows_ahead(x: np.ndarray, weights: np.ndarray, mean: np.ndarray, rows: np.ndarray, sensor: Sensor,

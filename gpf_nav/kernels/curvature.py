@@ -75,6 +75,21 @@ def largest_scaled(nu: np.ndarray, previous: np.ndarray, scale: np.ndarray) -> f
     return result
 
 
+@njit(cache=True, error_model="numpy")
+def scaled_by_particle(nu: np.ndarray, scale: np.ndarray, out: np.ndarray) -> bool:
+    """Write into ``out`` ``(N,)`` each particle's ``max |nu / scale|`` over ``nu`` ``(N, K)`` with ``scale``
+    ``(K,)`` (each term :func:`largest_scaled`'s); True when any term is NaN (``out`` then undefined)."""
+    nan = False
+    for j in range(nu.shape[0]):
+        largest = 0.0
+        for k in range(nu.shape[1]):
+            value = abs(nu[j, k] / scale[k])
+            largest = value if value > largest else largest
+            nan |= value != value
+        out[j] = largest
+    return nan
+
+
 @njit(cache=True, error_model="numpy", fastmath={"contract"})
 def _quadratic_block(x, mean, upper, out, column, start, offsets, totals):
     """:func:`quadratic_departure` of the particles ``start`` to ``start + CHUNK``: the offsets from the
