@@ -43,14 +43,13 @@ ITERATIONS = 3
 """Most fixed-point steps of the map back (:meth:`Flattening.unflatten`)."""
 FLAT_ENOUGH = 1e-2
 """Curvature, in measurement noise standard deviations, below which the cloud is left in the state's
-coordinates (:func:`flattening`): at every particle the measured rows, now and ahead, are then their
-linearisation at the mean to 1 % of the noise, and the likelihood of a particle three deviations out is
-off by 3 %, below the Monte Carlo error of the weights at a few hundred particles. The update's own
-linearisation is corrected by its exact weights; what flattening adds, the kernel's straight draws kept
-on the measurement's shells, matters for clouds kilometres wide (a large prior, range only), whose
-curvature is tenths of the noise and more. A cloud tracking the lunar descent in steady state curves by
-3e-3 to 3e-2 of the noise: most updates skip the flattening and its map back. The curvature tested is that
-of the cloud's outermost particles (:data:`OUTERMOST`)."""
+coordinates (:func:`flattening`): at every particle but the outermost (:data:`OUTERMOST`) the measured rows,
+now and ahead, are then their linearisation at the mean to 1 % of the noise, and the likelihood of a
+particle three deviations out is off by 3 %, below the Monte Carlo error of the weights at a few hundred
+particles. The update's own linearisation is corrected by its exact weights; what flattening adds, the
+kernel's straight draws kept on the measurement's shells, matters for clouds kilometres wide (a large
+prior, range only), whose curvature is tenths of the noise and more. A cloud tracking the lunar descent in
+steady state curves by 3e-3 to 3e-2 of the noise: most updates skip the flattening and its map back."""
 OUTERMOST = 500
 """The cloud's outermost particles, whose curvature :func:`flattening` tests against :data:`FLAT_ENOUGH`, are its
 ``N // OUTERMOST`` farthest out by it (below ``2 OUTERMOST`` particles the farthest one). The farthest particle of a
