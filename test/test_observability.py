@@ -137,6 +137,23 @@ def test_the_lunar_report_names_the_rotations_about_the_centre(case, d):
         assert _spans(undetermined_subspace(config, scenario.truth[-1]), report.directions, report.scale)
 
 
+@pytest.mark.parametrize("case, d", [("range", 3), ("partial", 1), ("full", 0)])
+def test_the_undetermined_rotations_of_many_states_are_each_states_own(case, d):
+    """States ``(K, 6)`` give ``(K, 6, d)``, each the single state's subspace bit for bit (the campaign runner
+    takes a whole trajectory's in one call); the rotation of a state about an axis moves it orthogonally to
+    that axis and to its position and velocity along it (``a x r``, ``a x v``)."""
+    config = ScenarioConfig(case=case)
+    states = generate(config, 0).truth[:50]
+    batch = undetermined_subspace(config, states)
+    assert batch.shape == (50, 6, d)
+    for state, subspace in zip(states, batch):
+        assert subspace.tobytes() == undetermined_subspace(config, state).tobytes()
+    axes = np.eye(3)[:, 3 - d:] if d == 1 else np.eye(3)[:, :d]
+    for j in range(d):
+        np.testing.assert_allclose(batch[:, :3, j], np.cross(axes[:, j], states[:, :3]))
+        np.testing.assert_allclose(batch[:, 3:, j], np.cross(axes[:, j], states[:, 3:]))
+
+
 @pytest.mark.parametrize("rebuild", [True, False])
 def test_a_moved_reference_keeps_the_polar_rotation_undetermined(monkeypatch, rebuild):
     """Case 2 with the 9 % gravity error: the nominal model's reference drifts and is moved to the filter's

@@ -166,6 +166,8 @@ def run_filter(flt, scenario, divergence_bound: float = DEFAULT_DIVERGENCE_BOUND
     named = np.full(steps, np.nan)
     fault = np.zeros(steps, dtype=bool)
     monitor = ConsistencyMonitor()
+    late = scenario.times - scenario.start_time >= REPORT_AFTER  # (the steps the verdicts count)
+    expected = undetermined_subspace(scenario.config, scenario.truth[1:])  # (K, 6, d) or None
     # (the sensor the monitor predicts with, the one the filter is given: None for its model's own, data)
     own = ModelSensor(filter_model(scenario.config))
     streams = [(own, None, scenario.measurements)] if stations is None else [(s, s, y) for s, y in stations]
@@ -184,7 +186,8 @@ def run_filter(flt, scenario, divergence_bound: float = DEFAULT_DIVERGENCE_BOUND
             report = flt.observability
             if report is not None:
                 undetermined[k] = report.undetermined
-                named[k] = _named(report, undetermined_subspace(scenario.config, scenario.truth[k + 1]))
+                if late[k]:
+                    named[k] = _named(report, None if expected is None else expected[k])
             mean = flt.mean
             if not np.all(np.isfinite(mean)):
                 error = f"non-finite estimate at step {k}"
@@ -202,7 +205,6 @@ def run_filter(flt, scenario, divergence_bound: float = DEFAULT_DIVERGENCE_BOUND
         error = f"{type(exc).__name__}: {exc}"
     seconds = time.perf_counter() - start
     nees = metrics.nees(state_errors, covariances)
-    late = scenario.times - scenario.start_time >= REPORT_AFTER
     nonfinite = error is not None
     finished = bool(np.all(np.isfinite(pos_err)))
     summary = {

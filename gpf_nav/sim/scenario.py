@@ -293,13 +293,16 @@ def undetermined_subspace(config: ScenarioConfig, state: np.ndarray) -> np.ndarr
     """The directions ``(6, d)`` of the state ``(6,)`` that the scenario's measurements cannot determine
     from the Moon's centre (columns, state units): any rotation of the whole trajectory about the centre
     for range only (``d = 3``), the rotation about the polar axis without azimuth (``d = 1``), none for
-    the full case (``(6, 0)``). None when the station is not at the centre or surface stations replace
-    it (no such symmetry)."""
+    the full case (``(6, 0)``); for states ``(K, 6)``, each one's ``(K, 6, d)``. None when the station is
+    not at the centre or surface stations replace it (no such symmetry)."""
     if any(config.station) or config.surface_stations:
         return None
-    axes = {"range": np.eye(3), "partial": np.eye(3)[:, 2:], "full": np.zeros((3, 0))}[config.case]
-    p, v = np.asarray(state[:3], dtype=float), np.asarray(state[3:6], dtype=float)
-    return np.vstack([np.cross(axes.T, p).T, np.cross(axes.T, v).T]) if axes.size else np.zeros((6, 0))
+    axes = {"range": np.eye(3), "partial": np.eye(3)[:, 2:], "full": np.zeros((3, 0))}[config.case].T  # (d, 3)
+    state = np.asarray(state, dtype=float)
+    if not axes.size:
+        return np.zeros(state.shape[:-1] + (6, 0))
+    p, v = state[..., None, :3], state[..., None, 3:6]  # (..., 1, 3): each axis crossed with them
+    return np.concatenate([np.cross(axes, p), np.cross(axes, v)], axis=-1).swapaxes(-1, -2)
 
 
 def _streams(seed: int) -> list[np.random.Generator]:
