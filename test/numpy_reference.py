@@ -49,6 +49,14 @@ def normalise(logw):
     return float(total), normalised, np.exp(normalised)
 
 
+def gaussian_log_likelihood(e, rows, w, constant):
+    """``constant - |W e|^2 / 2`` ``(N,)`` of the measured ``rows`` of the residuals ``e`` ``(m, N)``, ``W`` the
+    diagonal ``w`` ``(k,)`` or a matrix ``(k, k)``."""
+    e = e if rows.all() else e[rows]
+    ew = e * w[:, None] if w.ndim == 1 else w @ e
+    return constant - 0.5 * np.einsum("kn,kn->n", ew, ew)
+
+
 def _acceleration(r, gm, u):
     r2 = np.einsum("ij,ij->j", r, r)
     np.maximum(r2, MIN_RANGE_SQ, out=r2)

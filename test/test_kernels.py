@@ -15,6 +15,7 @@ import numpy_reference as reference
 from gpf_nav import resampling
 from gpf_nav.filters import BootstrapPF, GeometricProjectionPF, MultipleModelGPF
 from gpf_nav.filters.kernel import match_moments
+from gpf_nav.filters.likelihood import log_likelihood
 from gpf_nav.filters.model_averaging import mixture_moments
 from gpf_nav.filters.projection import project, select_columns, select_rows
 from gpf_nav.linalg import positive_definite
@@ -115,6 +116,22 @@ def test_the_log_weight_normalisation_is_the_numpy_one_bit_for_bit(count):
         untouched = np.full(count, 7.0)
         assert np.isnan(log_weights.normalise(empty, untouched, untouched))
         assert (untouched == 7.0).all()
+
+
+@pytest.mark.parametrize("count", (*SIZES, 2, VECTOR_MATH))
+def test_the_gaussian_log_likelihood_is_the_numpy_one_bit_for_bit(count):
+    """A diagonal whitener's in one compiled pass, every row or some, residuals of every magnitude and NaN;
+    a full whitener's (the numpy code) alike."""
+    rng = np.random.default_rng(70 + count)
+    for m in (1, 3, 6):
+        e = rng.standard_normal((m, count)) * 10.0 ** rng.uniform(-8, 6, (m, 1))
+        e[0, ::5] = np.nan
+        for rows in (np.ones(m, bool), np.arange(m) != m // 2):
+            k = int(rows.sum())
+            for w in (10.0 ** rng.uniform(-6, 8, k), np.tril(rng.standard_normal((k, k))) + 3.0 * np.eye(k)):
+                constant = float(rng.standard_normal() * 10.0)
+                got = log_likelihood(e.copy(), rows, (w, constant))
+                np.testing.assert_array_equal(got, reference.gaussian_log_likelihood(e, rows, w, constant))
 
 
 @pytest.mark.parametrize("count", SIZES)

@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 
+from gpf_nav.kernels.log_weights import whitened_log_likelihood
+
 
 class Whitening:
     """``(W, log of the Gaussian normalising constant)`` per mask of measured rows, for the noise ``R``
@@ -49,5 +51,9 @@ def log_likelihood(e: np.ndarray, rows: np.ndarray, whitening: tuple[np.ndarray,
     component, the measured ``rows`` ``(m,)`` bool and their ``whitening`` ``(W, constant)``."""
     w, constant = whitening
     e = e if rows.all() else e[rows]
+    if w.ndim == 1 and e.shape[0] and e.shape[1] > 1:  # (a diagonal whitener: one compiled pass)
+        out = np.empty(e.shape[1])
+        whitened_log_likelihood(e, w, constant, out)
+        return out
     ew = e * w[:, None] if w.ndim == 1 else w @ e  # (k, N)
     return constant - 0.5 * np.einsum("kn,kn->n", ew, ew)

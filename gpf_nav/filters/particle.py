@@ -102,8 +102,11 @@ class ParticleFilter(Filter):
         self.normal_draws = NormalDraws(self.rng)
         n = model.state_dim
         self._x = np.zeros((n, self.n_particles))
-        self._logw = np.full(self.n_particles, -np.log(self.n_particles))
-        self._weights = np.full(self.n_particles, 1.0 / self.n_particles)
+        # the uniform log-weights and weights, copied at every resampling (a new array each time: weights
+        # handed out stay as they were)
+        self._uniform = (np.full(self.n_particles, -np.log(self.n_particles)),
+                         np.full(self.n_particles, 1.0 / self.n_particles))
+        self._logw, self._weights = self._uniform[0].copy(), self._uniform[1].copy()
         self._moments = None
         self._pending_dt = 0.0
         self._pending_t = 0.0
@@ -460,8 +463,7 @@ class ParticleFilter(Filter):
         return log_likelihood(e, rows, self._whitening(rows, fraction))
 
     def _set_uniform_weights(self) -> None:
-        self._logw = np.full(self.n_particles, -np.log(self.n_particles))
-        self._weights = np.full(self.n_particles, 1.0 / self.n_particles)
+        self._logw, self._weights = self._uniform[0].copy(), self._uniform[1].copy()
 
 
 class BootstrapPF(ParticleFilter):

@@ -1,4 +1,5 @@
-"""Normalisation of a particle filter's log-weights (log-sum-exp) in three passes without temporaries.
+"""Normalisation of a particle filter's log-weights (log-sum-exp) in three passes without temporaries, and the
+Gaussian log-likelihood they are incremented by.
 
 The numpy code it replaces (NaN to ``-inf``, the peak, ``exp(logw - peak)``, their sum, then
 ``logw - total`` and its ``exp``) makes eight passes over the weights and four temporaries; at a few
@@ -122,3 +123,22 @@ def normalise(logw: np.ndarray, normalised: np.ndarray, weights: np.ndarray) -> 
     np.subtract(logw, total, out=normalised)
     np.exp(normalised, out=weights)
     return total
+
+
+@njit(cache=True, error_model="numpy")
+def whitened_log_likelihood(e: np.ndarray, w: np.ndarray, constant: float, out: np.ndarray) -> None:
+    """``constant - |w * e_n|^2 / 2`` into ``out`` ``(N,)`` for the residuals ``e`` ``(k, N)`` (``k >= 1``) and
+    the diagonal whitener ``w`` ``(k,)``: the numpy code's ``e * w[:, None]`` squared and summed over ``k`` in
+    order, as ``np.einsum("kn,kn->n")`` sums them from two particles on (one particle's column it sums in
+    another order), bit for bit, without the ``(k, N)`` temporary. Row by row, so the loops vectorise."""
+    first, scale = e[0], w[0]
+    for j in range(out.size):
+        a = first[j] * scale
+        out[j] = a * a
+    for c in range(1, e.shape[0]):
+        row, scale = e[c], w[c]
+        for j in range(out.size):
+            a = row[j] * scale
+            out[j] += a * a
+    for j in range(out.size):
+        out[j] = constant - 0.5 * out[j]
