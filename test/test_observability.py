@@ -140,8 +140,8 @@ def test_the_lunar_report_names_the_rotations_about_the_centre(case, d):
 @pytest.mark.parametrize("case, d", [("range", 3), ("partial", 1), ("full", 0)])
 def test_the_undetermined_rotations_of_many_states_are_each_states_own(case, d):
     """States ``(K, 6)`` give ``(K, 6, d)``, each the single state's subspace bit for bit (the campaign runner
-    takes a whole trajectory's in one call); the rotation of a state about an axis moves it orthogonally to
-    that axis and to its position and velocity along it (``a x r``, ``a x v``)."""
+    takes a whole trajectory's in one call); a rotation about the axis ``a`` moves the state along
+    ``(a x r, a x v)``."""
     config = ScenarioConfig(case=case)
     states = generate(config, 0).truth[:50]
     batch = undetermined_subspace(config, states)

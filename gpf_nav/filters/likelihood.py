@@ -51,7 +51,9 @@ def log_likelihood(e: np.ndarray, rows: np.ndarray, whitening: tuple[np.ndarray,
     component, the measured ``rows`` ``(m,)`` bool and their ``whitening`` ``(W, constant)``."""
     w, constant = whitening
     e = e if rows.all() else e[rows]
-    if w.ndim == 1 and e.shape[0] and e.shape[1] > 1:  # (a diagonal whitener: one compiled pass)
+    # a diagonal whitener in one compiled pass, the numpy code's numbers (from two particles: einsum sums one
+    # particle's rows in another order; and with no row the constant alone)
+    if w.ndim == 1 and e.shape[0] and e.shape[1] > 1:
         out = np.empty(e.shape[1])
         whitened_log_likelihood(e, w, constant, out)
         return out
