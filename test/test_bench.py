@@ -96,6 +96,31 @@ def test_bench_steps_follow_the_measurements_in_order():
     assert later[0].time == pytest.approx(made[0].time)
 
 
+def test_with_reports_every_filters_observability_recursions_run_inside_the_timed_blocks():
+    """A bootstrap PF's tracker queues its recursions until its report is read: without ``reports`` the blocks
+    leave them queued (untimed), with it none is left; the peer, which has no report, runs either way; the
+    estimates are the same."""
+    from dataclasses import replace
+
+    from gpf_nav.filters import BootstrapPF
+    from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
+
+    config = replace(ScenarioConfig(), duration=2.0 * (bench.WARMUP + 2 * 10 + 1))
+    scenario, model = generate(config, 0), filter_model(config)
+    made = {}
+    for reports in (False, True):
+        made[reports] = []
+        bench.time_filters([lambda m, seed, out=made[reports]: out.append(BootstrapPF(m, 200, seed=seed)) or out[-1],
+                            lambda m, seed: _Recorder([])], scenario, model, steps=10, repeats=2, reports=reports)
+    quiet, read = made[False][0], made[True][0]
+    assert len(quiet._observability._queue) == 2 * (bench.WARMUP + 20)  # (a prediction and an update a step)
+    assert len(read._observability._queue) == 0
+    np.testing.assert_array_equal(quiet.mean, read.mean)
+    assert quiet.observability.updates == read.observability.updates == bench.WARMUP + 20
+    report = bench.run((200,), repeats=1, filters=("spf",), warmup=2, reports=True)
+    assert report["reports"] is True and "observability report read at each step" in bench.format_table(report)
+
+
 class _Recorder:
     """A filter that records which measurement each of its updates got, and when (a shared counter)."""
 

@@ -17,7 +17,10 @@ a warm-up; the ratios (:data:`RATIOS`: GPF/SPF, GPF/GPF-paper, GPF/particles, SP
 GPF-paper/particles) are the medians over the rounds of the ratio of the two blocks of a round. The warm-up is
 :data:`WARMUP` steps: the blocks then time the descent's first minutes, where the navigation-grade GPF's
 clouds are wide enough to be flattened at most updates; ``--warmup 300`` times the steady state that follows,
-where most updates skip it (``docs/filters.md``).
+where most updates skip it (``docs/filters.md``). A filter's observability tracker runs its recursions when its
+report is read (:class:`~gpf_nav.integrity.observability.ObservabilityTracker`): the default reads it at every update,
+the others' are left queued and not timed unless ``--reports`` reads every filter's report after each step, as the
+node's diagnostics and the campaigns do.
 ``gpf-nav bench`` runs with the heap tuning of :mod:`gpf_nav.allocator` and OpenMP's passive waits
 (:mod:`gpf_nav.openmp`; the report says whether each was applied); ``python -m gpf_nav.experiments.bench``
 runs with the C library's default allocator and OpenMP's default policy, for comparison. ``--node`` runs the
@@ -90,12 +93,14 @@ LARGE_STEPS = 2
 
 
 def time_filters(makers, scenario, model, steps: int, repeats: int, warmup: int = WARMUP,
-                 after_block: Callable[[int, object, int], None] | None = None) -> list[list[float]]:
+                 after_block: Callable[[int, object, int], None] | None = None,
+                 reports: bool = False) -> list[list[float]]:
     """Seconds per predict+update step of each filter made by ``makers`` (``constructor(model, seed)``), one
     list of ``repeats`` block times each: the filters run blocks of ``steps`` steps in turn, round after
     round, the first of a round rotating. Each filter's step takes the scenario's next measurement (so it
-    runs in its normal regime, tracking the truth). ``after_block(i, filter, k)``, untimed, follows each
-    block of filter ``i`` that ended with its estimate of ``scenario.truth[k]``."""
+    runs in its normal regime, tracking the truth); with ``reports`` it also reads the filter's
+    observability report (none for the peer). ``after_block(i, filter, k)``, untimed, follows each block of
+    filter ``i`` that ended with its estimate of ``scenario.truth[k]``."""
     if warmup + repeats * steps > len(scenario.measurements):
         raise ValueError(f"the scenario has {len(scenario.measurements)} measurements, the timing needs "
                          f"{warmup + repeats * steps}")
@@ -116,6 +121,8 @@ def time_filters(makers, scenario, model, steps: int, repeats: int, warmup: int 
             for k in range(first, first + steps):
                 f.predict(dt)
                 f.update(ys[k])
+                if reports:
+                    getattr(f, "observability", None)
             blocks[i].append((time.perf_counter() - start) / steps)
             if after_block is not None:
                 after_block(i, f, first + steps)
@@ -144,11 +151,12 @@ def time_filter(make, scenario, model, steps: int, repeats: int, warmup: int = W
 
 
 def run(particle_counts=PARTICLE_COUNTS, repeats: int = 15, seed: int = 0, filters=FILTERS,
-        warmup: int = WARMUP) -> dict:
-    """Benchmark ``filters`` (registry names) after ``warmup`` untimed steps; returns ``{"results": [{"filter",
-    "particles", "us_per_step", "blocks_us" (per round), and :func:`accuracy`'s keys}, ...], "gpf_over_spf":
-    {N: ratio}, ... (one key per :data:`RATIOS` entry, each empty unless both of its filters ran: those
-    against ``particles`` without that library), "warmup": steps, "machine": ...}`` (module docstring)."""
+        warmup: int = WARMUP, reports: bool = False) -> dict:
+    """Benchmark ``filters`` (registry names) after ``warmup`` untimed steps, with ``reports`` each filter's
+    observability report read after every step; returns ``{"results": [{"filter", "particles", "us_per_step",
+    "blocks_us" (per round), and :func:`accuracy`'s keys}, ...], "gpf_over_spf": {N: ratio}, ... (one key per
+    :data:`RATIOS` entry, each empty unless both of its filters ran: those against ``particles`` without that
+    library), "warmup": steps, "reports": reports, "machine": ...}`` (module docstring)."""
     default = ScenarioConfig()
     config = replace(default, duration=default.dt * (warmup + repeats * STEPS + 1))
     scenario = generate(config, seed)
@@ -159,7 +167,7 @@ def run(particle_counts=PARTICLE_COUNTS, repeats: int = 15, seed: int = 0, filte
         steps = STEPS if n <= 10_000 else 5 if n < LARGE else LARGE_STEPS
         ends: list[list[tuple[float, float, float]]] = [[] for _ in group]
         blocks = time_filters([make for _, _, make in group], scenario, model, steps, repeats, warmup,
-                              lambda i, f, k: ends[i].append(estimate_errors(f, scenario.truth[k])))
+                              lambda i, f, k: ends[i].append(estimate_errors(f, scenario.truth[k])), reports)
         for (name, count, _), times, errors in zip(group, blocks, ends):
             results.append({"filter": name, "particles": count, "us_per_step": float(np.median(times)) * 1e6,
                             "blocks_us": [t * 1e6 for t in times], **accuracy(errors)})
@@ -168,7 +176,7 @@ def run(particle_counts=PARTICLE_COUNTS, repeats: int = 15, seed: int = 0, filte
             for key, numerator, denominator in RATIOS:
                 if numerator in by_name and denominator in by_name:
                     ratios[key][str(n)] = float(np.median(by_name[numerator] / by_name[denominator]))
-    return {"results": results, **ratios, "warmup": warmup,
+    return {"results": results, **ratios, "warmup": warmup, "reports": reports,
             "machine": {"python": platform.python_version(), "numpy": np.__version__,
                         "processor": platform.machine(),
                         "allocator": "retain_freed_memory" if allocator.retained else "default",
@@ -189,7 +197,8 @@ def format_table(report: dict) -> str:
         lines.append(f"{r['filter']:<10} {n:>8} {shown:>12} {r['position_rms_m']:>10.4g} "
                      f"{r['velocity_rms_m_s']:>12.4g} {r['nees_mean']:>7.3g} {r['position_worst_m']:>8.4g}")
     lines.append("position, velocity (RMS), NEES (mean) and worst position error: the estimates at the blocks' ends")
-    lines.append(f"ratios (medians over rounds of blocks timed in turn, after {report['warmup']} steps):")
+    read = ", every filter's observability report read at each step" if report.get("reports") else ""
+    lines.append(f"ratios (medians over rounds of blocks timed in turn, after {report['warmup']} steps{read}):")
     for key, numerator, denominator in RATIOS:
         if report.get(key):
             lines.append(f"{_LABELS[numerator]}/{_LABELS[denominator]}: "
@@ -213,6 +222,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--warmup", type=non_negative_int, default=WARMUP,
                         help=f"untimed steps before the first block (default {WARMUP}: the first minutes; "
                              "300: the steady state)")
+    parser.add_argument("--reports", action="store_true",
+                        help="read every filter's observability report after each step (as the node's diagnostics "
+                             "and the campaigns do; otherwise only the default's update reads it)")
     parser.add_argument("--node", action="store_true",
                         help="run the ROS node-latency benchmark instead (arguments after -- go to it)")
     args, rest = parser.parse_known_args(argv)
@@ -227,7 +239,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as err:
         parser.error(str(err))
     report = run(tuple(args.particles) + ((LARGE,) if args.large else ()), args.repeats, filters=filters,
-                 warmup=args.warmup)
+                 warmup=args.warmup, reports=args.reports)
     print(json.dumps(report, indent=2) if args.json else format_table(report))
     return 0
 
