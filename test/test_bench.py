@@ -98,8 +98,8 @@ def test_bench_steps_follow_the_measurements_in_order():
 
 def test_with_reports_every_filters_observability_recursions_run_inside_the_timed_blocks():
     """A bootstrap PF's tracker queues its recursions until its report is read: without ``reports`` the blocks
-    leave them queued (untimed), with it none is left; the peer, which has no report, runs either way; the
-    estimates are the same."""
+    leave them queued (untimed), with it none is left; a filter without a report runs either way; the estimates
+    are the same."""
     from dataclasses import replace
 
     from gpf_nav.filters import BootstrapPF
@@ -125,6 +125,7 @@ class _Recorder:
     """A filter that records which measurement each of its updates got, and when (a shared counter)."""
 
     clock = 0
+    observability = None
 
     def __init__(self, log):
         self.log = log

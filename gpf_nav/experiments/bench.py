@@ -99,7 +99,7 @@ def time_filters(makers, scenario, model, steps: int, repeats: int, warmup: int 
     list of ``repeats`` block times each: the filters run blocks of ``steps`` steps in turn, round after
     round, the first of a round rotating. Each filter's step takes the scenario's next measurement (so it
     runs in its normal regime, tracking the truth); with ``reports`` it also reads the filter's
-    observability report (none for the peer). ``after_block(i, filter, k)``, untimed, follows each block of
+    observability report. ``after_block(i, filter, k)``, untimed, follows each block of
     filter ``i`` that ended with its estimate of ``scenario.truth[k]``."""
     if warmup + repeats * steps > len(scenario.measurements):
         raise ValueError(f"the scenario has {len(scenario.measurements)} measurements, the timing needs "
@@ -122,7 +122,7 @@ def time_filters(makers, scenario, model, steps: int, repeats: int, warmup: int 
                 f.predict(dt)
                 f.update(ys[k])
                 if reports:
-                    getattr(f, "observability", None)
+                    f.observability
             blocks[i].append((time.perf_counter() - start) / steps)
             if after_block is not None:
                 after_block(i, f, first + steps)

@@ -55,6 +55,11 @@ class ParticlesBootstrap:
         """Weighted covariance ``(n, n)`` of the cloud."""
         return np.cov(self._smc.X, rowvar=False, aweights=self._smc.W, bias=True)
 
+    @property
+    def observability(self) -> None:
+        """None: the library keeps no observability report (``gpf-nav bench --reports`` reads it)."""
+        return None
+
     def _build(self):
         import particles
         from particles import distributions as dists
