@@ -23,6 +23,7 @@ from gpf_nav.kernels import (VECTOR_MATH, bearing, cloud, covariance, diagonal_p
                              orbit)
 from gpf_nav.kernels import curvature as curvature_kernels
 from gpf_nav.kernels.curvature import departure, largest_scaled, quadratic_departure, scaled_by_particle
+from gpf_nav.kernels.normals import fill_standard_normal
 from gpf_nav.kernels.systematic import systematic_ancestors
 from gpf_nav.models.compensation import ModelErrorCompensation
 from gpf_nav.models.lunar import MU_MOON, LunarDescentModel
@@ -626,3 +627,14 @@ def test_the_mixture_moments_are_the_numpy_ones_bit_for_bit():
         got, expected = mixture_moments(weights, moments), reference.mixture_moments(weights, moments)
         np.testing.assert_array_equal(got[0], expected[0])
         np.testing.assert_array_equal(got[1], expected[1])
+
+
+@pytest.mark.parametrize("bit_generator", (np.random.PCG64, np.random.SFC64, np.random.Philox, np.random.MT19937))
+@pytest.mark.parametrize("count", (0, 1, 7, 3000))
+def test_the_compiled_normal_draw_is_numpys_number_for_number(bit_generator, count):
+    """The numbers of ``Generator.standard_normal``, and the generator left in the state it leaves."""
+    ours, numpys = (np.random.Generator(bit_generator(17)) for _ in range(2))
+    row = np.full(count, np.nan)
+    fill_standard_normal(ours, row)
+    np.testing.assert_array_equal(row, numpys.standard_normal(count))
+    assert ours.random() == numpys.random()

@@ -1,5 +1,6 @@
 """The particle filters' standard normal draws (:mod:`gpf_nav.filters.normal_draws`): the generator's own
-below the row streams' size, reproducible and independent of the threads from it, and standard normal."""
+below the row streams' size, each row its stream's own from it, reproducible and independent of the threads,
+and standard normal."""
 import os
 import threading
 
@@ -9,6 +10,7 @@ import pytest
 from gpf_nav.filters import normal_draws
 from gpf_nav.filters.normal_draws import ROW_STREAMS, NormalDraws
 from gpf_nav.filters.particle import BootstrapPF
+from gpf_nav.kernels import PARALLEL
 from gpf_nav.models.lunar import LunarDescentModel
 
 
@@ -17,12 +19,21 @@ def test_a_small_draw_is_the_generators_own():
     expected = np.random.default_rng(5)
     for rows, count in ((6, 500), (9, ROW_STREAMS - 1), (3, 1)):
         np.testing.assert_array_equal(draws(rows, count), expected.standard_normal((rows, count)))
+    assert draws.rng.random() == expected.random()  # (the generator left as numpy's draw leaves it)
+
+
+def test_each_row_of_a_large_draw_is_its_streams_own_numpy_draw():
+    seed = np.random.default_rng(9).integers(2 ** 63)  # (what the filter's generator gives the row streams)
+    children = np.random.SeedSequence(int(seed)).spawn(6)
+    z = NormalDraws(np.random.default_rng(9))(6, ROW_STREAMS + 1)
+    for row, child in zip(z, children):
+        np.testing.assert_array_equal(row, np.random.Generator(np.random.SFC64(child)).standard_normal(row.size))
 
 
 @pytest.mark.parametrize("workers", (1, 2, 5))
 def test_a_large_draw_depends_on_the_seed_and_the_shapes_not_on_the_threads(monkeypatch, workers):
     reference = NormalDraws(np.random.default_rng(11))
-    shapes = ((6, ROW_STREAMS), (9, ROW_STREAMS + 3), (6, 2 * ROW_STREAMS))
+    shapes = ((6, ROW_STREAMS), (9, ROW_STREAMS + 3), (6, PARALLEL), (7, PARALLEL + 1))  # (threads from PARALLEL)
     expected = [reference(*shape) for shape in shapes]
     monkeypatch.setattr(normal_draws, "_workers", lambda: workers)
     draws = NormalDraws(np.random.default_rng(11))
@@ -74,12 +85,12 @@ def test_a_large_bootstrap_filter_is_reproducible_bit_for_bit():
 def test_a_forked_child_draws_on_a_pool_of_its_own():
     """The parent's pool threads are not in a forked child: its large draws still complete, with the
     parent's numbers for the same seed."""
-    expected = NormalDraws(np.random.default_rng(21))(6, ROW_STREAMS)  # (the parent's pool now exists)
+    expected = NormalDraws(np.random.default_rng(21))(6, PARALLEL)  # (the parent's pool now exists)
     read, write = os.pipe()
     child = os.fork()
     if child == 0:  # pragma: no cover (the child)
         try:
-            same = np.array_equal(NormalDraws(np.random.default_rng(21))(6, ROW_STREAMS), expected)
+            same = np.array_equal(NormalDraws(np.random.default_rng(21))(6, PARALLEL), expected)
             os.write(write, b"1" if same else b"0")
         finally:
             os._exit(0)

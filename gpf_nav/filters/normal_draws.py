@@ -1,15 +1,15 @@
-"""The particle filters' standard normal draws: the filter's own generator for a small cloud, rows drawn on
-every core for a large one.
+"""The particle filters' standard normal draws: the filter's own generator for a small cloud, rows of streams
+of their own for a large one, filled by a compiled loop (:mod:`gpf_nav.kernels.normals`).
 
-Six normal draws per particle are close to half of a bootstrap filter's step at ten thousand particles
-(numpy's generator takes ~12 ns a draw here). From :data:`ROW_STREAMS` particles each row of a draw
-therefore comes from a stream of its own (numpy's fastest bit generator, SFC64), and the rows are filled
-by the calling thread and a pool of others at once, which numpy's generator allows (a sized draw releases
-the GIL). The row streams are children of a ``SeedSequence`` seeded by one integer the filter's generator
-draws at the first large draw: the numbers depend on the filter's seed and on the shapes drawn, never on
-the number of threads, so a run is still reproducible bit for bit, and each row is an exact standard
-normal draw independent of the others. Below :data:`ROW_STREAMS` the draw is the generator's own
-``standard_normal``: handing rows to other threads would cost more than it saves there.
+Six normal draws per particle are a large part of a bootstrap filter's step (numpy's own loop takes ~10 ns a
+draw here, the compiled one ~4 to 6). From :data:`ROW_STREAMS` particles each row of a draw comes from a
+stream of its own (numpy's fastest bit generator, SFC64), and from :data:`~gpf_nav.kernels.PARALLEL`
+particles the rows are filled by the calling thread and a pool of others at once (the compiled loop
+releases the GIL; below that size handing rows to the pool costs more than it saves). The row streams are
+children of a ``SeedSequence`` seeded by one integer the filter's generator draws at the first large draw:
+the numbers depend on the filter's seed and on the shapes drawn, never on the number of threads, so a run
+is still reproducible bit for bit, and each row is an exact standard normal draw independent of the others.
+Below :data:`ROW_STREAMS` the draw is the generator's own ``standard_normal``, number for number.
 """
 from __future__ import annotations
 
@@ -18,8 +18,12 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from gpf_nav.kernels import PARALLEL
+from gpf_nav.kernels.normals import fill_standard_normal
+
 ROW_STREAMS = 4_096
-"""Particles from which the rows of a draw come from streams of their own, filled on every core."""
+"""Particles from which the rows of a draw come from streams of their own (filled on every core from
+:data:`~gpf_nav.kernels.PARALLEL`)."""
 _pool: ThreadPoolExecutor | None = None
 
 
@@ -33,16 +37,17 @@ class NormalDraws:
 
     def __call__(self, rows: int, count: int) -> np.ndarray:
         """``(rows, count)`` independent standard normals."""
-        if count < ROW_STREAMS:
-            return self.rng.standard_normal((rows, count))
-        streams = self._row_streams(rows)
         out = np.empty((rows, count))
-        workers = _workers()
+        if count < ROW_STREAMS:
+            fill_standard_normal(self.rng, out.reshape(-1))
+            return out
+        streams = self._row_streams(rows)
+        workers = _workers() if count >= PARALLEL else 1
         groups = [range(first, rows, workers) for first in range(min(workers, rows))]
 
         def fill(group: range) -> None:
             for row in group:
-                streams[row].standard_normal(out=out[row])
+                fill_standard_normal(streams[row], out[row])
 
         others = [_threads().submit(fill, group) for group in groups[1:]]
         fill(groups[0])  # (this thread's share)
