@@ -5,6 +5,7 @@ import numpy as np
 
 from gpf_nav.filters.interface import CLOUD, N_PARTICLES, Filter
 from gpf_nav.filters.kalman import ModelNoise, innovation_solve, readonly_view
+from gpf_nav.filters.normal_draws import NormalDraws
 from gpf_nav.linalg import positive_definite, psd_sqrt
 from gpf_nav.models.state_space import StateSpaceModel
 
@@ -16,7 +17,8 @@ class EnsembleKF(Filter):
     the measured rows: predicted-measurement anomalies are ``model.residual(h(X), h_mean)`` with
     ``h_mean = model.measurement_mean`` (angles wrapped about their circular mean), the gain solves
     ``Pyy K^T = Pxy^T`` and each member is moved by its own perturbed innovation
-    ``residual(y, h(x_i)) + e_i``, ``e_i ~ N(0, R)`` drawn from ``self.rng``.
+    ``residual(y, h(x_i)) + e_i``, ``e_i ~ N(0, R)`` drawn from ``self.rng``
+    (:class:`~gpf_nav.filters.normal_draws.NormalDraws`).
 
     Args:
         model: the state-space model.
@@ -36,11 +38,12 @@ class EnsembleKF(Filter):
         self._X = np.zeros((self.n_particles, model.state_dim))
         self._weights = np.full(self.n_particles, 1.0 / self.n_particles)
         self._noise = ModelNoise(model)
+        self.normal_draws = NormalDraws(self.rng)
 
     def initialize(self, mean: np.ndarray, cov: np.ndarray, t0: float = 0.0) -> None:
         """Draw the ``N`` members from ``N(mean (n,), cov (n, n))``."""
         mean, cov = self._check_prior(mean, cov, t0)
-        z = self.rng.standard_normal(self._X.shape)
+        z = self.normal_draws(*self._X.shape)
         self._X = mean + z @ psd_sqrt(cov).T
         self.last_log_likelihood = 0.0
         self._remember(mean, cov)
@@ -54,7 +57,7 @@ class EnsembleKF(Filter):
             return
         self._observe_predict(dt, u)
         X = self.model.transition(self._X, dt, self.time, u)
-        self._X = X + self.rng.standard_normal(X.shape) @ self._noise.process_sqrt(dt, self.time).T
+        self._X = X + self.normal_draws(*X.shape) @ self._noise.process_sqrt(dt, self.time).T
         self.time += dt
         self._guard(False, self.mean, self.covariance)
 
@@ -87,7 +90,7 @@ class EnsembleKF(Filter):
         except np.linalg.LinAlgError:
             self._recover("innovation covariance not positive definite")
             return
-        innovations += self.rng.standard_normal(innovations.shape) @ self._noise.measurement_sqrt(mask, R).T
+        innovations += self.normal_draws(*innovations.shape) @ self._noise.measurement_sqrt(mask, R).T
         self._X = X + innovations @ Kt
         self._guard(True, self.mean, self.covariance)
 
