@@ -3,9 +3,10 @@ the small-matrix arithmetic every filter runs at each step (the observability tr
 :mod:`~gpf_nav.kernels.information`; the covariance floor's screen, :mod:`~gpf_nav.kernels.covariance`).
 
 Plain functions over float64 arrays, particle index last (``(n, N)``), called from the numpy code paths
-of :mod:`gpf_nav.filters`, :mod:`gpf_nav.models` and :mod:`gpf_nav.resampling`; random numbers are drawn
-by the callers with numpy's ``Generator`` and passed in, so the streams stay those of the numpy code
-(results equal to rounding, most of them bit for bit: ``test/test_kernels.py`` checks each kernel against
+of :mod:`gpf_nav.filters`, :mod:`gpf_nav.models` and :mod:`gpf_nav.resampling`; random numbers come from
+the filters' numpy ``Generator`` (drawn by the callers and passed in, or, for the normal draws, drawn here from
+the generator by numpy's own algorithm, :mod:`~gpf_nav.kernels.normals`), so the streams stay those of the
+numpy code (results equal to rounding, most of them bit for bit: ``test/test_kernels.py`` checks each kernel against
 the numpy it replaced, ``test/numpy_reference.py``). Each kernel is compiled at its first call and cached
 on disk (``__pycache__``, or numba's user cache where that is not writable): a fresh install pays the
 compilation once. A user's own model's methods stay its numpy; the machinery around them (the
