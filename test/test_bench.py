@@ -177,3 +177,43 @@ def test_particles_bootstrap_tracks_the_descent():
         f.predict(config.dt)
         f.update(scenario.measurements[k])
     assert np.linalg.norm(f.mean[:3] - scenario.truth[20, :3]) < 3e3
+
+
+def test_the_model_call_timer_counts_outermost_calls_and_leaves_the_model_as_it_was():
+    """Every public method of the model instance is timed while the timer is installed; a model method that
+    calls another (the default ``measure_and_jacobian`` calls ``measure`` and ``measurement_jacobian``)
+    counts once; each block records its calls per step; afterwards the class's methods answer again."""
+    from gpf_nav.experiments.model_calls import ModelCallTimer
+    from gpf_nav.models.linear import LinearGaussianModel
+
+    model = LinearGaussianModel(A=[[0.0, 1.0], [0.0, 0.0]], G=[[0.0], [1.0]], C=[[1.0, 0.0]], R=[[1.0]])
+    x = np.ones((3, 2))
+    with ModelCallTimer(model) as timer:
+        assert "measure" in vars(model) and "transition" in vars(model)
+        np.testing.assert_array_equal(model.measure(x), x[:, :1])  # (the model's own answer)
+        assert timer.calls == 1
+        model.measure_and_jacobian(x)
+        assert timer.calls == 2 and timer.seconds > 0.0
+        timer.start_block()
+        for _ in range(4):
+            model.transition(x, 1.0)
+        model.measure_and_jacobian(x)
+        timer.end_block(7, steps=5)
+        assert [calls for _, calls in timer.blocks[7]] == [1.0] and timer.blocks[7][0][0] > 0.0
+    assert not {"measure", "transition", "measure_and_jacobian"} & set(vars(model)) and timer.calls == 7
+    model.measure(x)
+    assert timer.calls == 7
+
+
+def test_bench_splits_each_step_into_the_model_and_the_filter_with_model_calls():
+    """``--model-calls``: every row has the time and calls per step inside the lunar model, part of its step:
+    a bootstrap PF calls it at least to propagate and to weigh, the default many times more (its flows ahead);
+    without the option the rows have neither."""
+    report = bench.run((200,), repeats=2, filters=("gpf", "spf", "ekf"), warmup=2, model_calls=True)
+    rows = {r["filter"]: r for r in report["results"]}
+    for r in rows.values():
+        assert 0.0 < r["model_us_per_step"] < r["us_per_step"] and r["model_calls_per_step"] >= 2.0, r
+    assert rows["gpf"]["model_calls_per_step"] > 5 * rows["spf"]["model_calls_per_step"]
+    assert report["model_calls"] is True and "in the model" in bench.format_table(report)
+    plain = bench.run((200,), repeats=1, filters=("spf",), warmup=2)
+    assert "model_us_per_step" not in plain["results"][0] and "in the model" not in bench.format_table(plain)

@@ -28,6 +28,7 @@ ROS node-latency benchmark instead (``gpf_nav.tools.latency``).
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import platform
@@ -41,6 +42,7 @@ from gpf_nav import allocator, registry
 from gpf_nav.arguments import CommandParser, non_negative_int, positive_int
 from gpf_nav.experiments import peer_particles
 from gpf_nav.experiments.metrics import nees_step, rmse
+from gpf_nav.experiments.model_calls import ModelCallTimer
 from gpf_nav.experiments.peer_particles import ParticlesBootstrap
 from gpf_nav.sim.scenario import ScenarioConfig, filter_model, generate
 
@@ -94,13 +96,14 @@ LARGE_STEPS = 2
 
 def time_filters(makers, scenario, model, steps: int, repeats: int, warmup: int = WARMUP,
                  after_block: Callable[[int, object, int], None] | None = None,
-                 reports: bool = False) -> list[list[float]]:
+                 reports: bool = False, timer: ModelCallTimer | None = None) -> list[list[float]]:
     """Seconds per predict+update step of each filter made by ``makers`` (``constructor(model, seed)``), one
     list of ``repeats`` block times each: the filters run blocks of ``steps`` steps in turn, round after
     round, the first of a round rotating. Each filter's step takes the scenario's next measurement (so it
     runs in its normal regime, tracking the truth); with ``reports`` it also reads the filter's
     observability report. ``after_block(i, filter, k)``, untimed, follows each block of
-    filter ``i`` that ended with its estimate of ``scenario.truth[k]``."""
+    filter ``i`` that ended with its estimate of ``scenario.truth[k]``. With ``timer`` (installed on
+    ``model``), each block's seconds and calls per step inside the model go to ``timer.blocks[i]``."""
     if warmup + repeats * steps > len(scenario.measurements):
         raise ValueError(f"the scenario has {len(scenario.measurements)} measurements, the timing needs "
                          f"{warmup + repeats * steps}")
@@ -117,6 +120,8 @@ def time_filters(makers, scenario, model, steps: int, repeats: int, warmup: int 
         first = warmup + round_ * steps
         for i in [(round_ + j) % count for j in range(count)]:
             f = filters[i]
+            if timer is not None:
+                timer.start_block()
             start = time.perf_counter()
             for k in range(first, first + steps):
                 f.predict(dt)
@@ -124,6 +129,8 @@ def time_filters(makers, scenario, model, steps: int, repeats: int, warmup: int 
                 if reports:
                     f.observability
             blocks[i].append((time.perf_counter() - start) / steps)
+            if timer is not None:
+                timer.end_block(i, steps)
             if after_block is not None:
                 after_block(i, f, first + steps)
     return blocks
@@ -151,12 +158,15 @@ def time_filter(make, scenario, model, steps: int, repeats: int, warmup: int = W
 
 
 def run(particle_counts=PARTICLE_COUNTS, repeats: int = 15, seed: int = 0, filters=FILTERS,
-        warmup: int = WARMUP, reports: bool = False) -> dict:
+        warmup: int = WARMUP, reports: bool = False, model_calls: bool = False) -> dict:
     """Benchmark ``filters`` (registry names) after ``warmup`` untimed steps, with ``reports`` each filter's
     observability report read after every step; returns ``{"results": [{"filter", "particles", "us_per_step",
     "blocks_us" (per round), and :func:`accuracy`'s keys}, ...], "gpf_over_spf": {N: ratio}, ... (one key per
     :data:`RATIOS` entry, each empty unless both of its filters ran: those against ``particles`` without that
-    library), "warmup": steps, "reports": reports, "machine": ...}`` (module docstring)."""
+    library), "warmup": steps, "reports": reports, "model_calls": model_calls, "machine": ...}`` (module
+    docstring). With ``model_calls`` every result also has ``"model_us_per_step"`` and ``"model_calls_per_step"``,
+    the medians over its blocks of the time and calls spent inside the lunar model
+    (:class:`~gpf_nav.experiments.model_calls.ModelCallTimer`)."""
     default = ScenarioConfig()
     config = replace(default, duration=default.dt * (warmup + repeats * STEPS + 1))
     scenario = generate(config, seed)
@@ -166,17 +176,23 @@ def run(particle_counts=PARTICLE_COUNTS, repeats: int = 15, seed: int = 0, filte
         n = max(count or 0 for _, count, _ in group)
         steps = STEPS if n <= 10_000 else 5 if n < LARGE else LARGE_STEPS
         ends: list[list[tuple[float, float, float]]] = [[] for _ in group]
-        blocks = time_filters([make for _, _, make in group], scenario, model, steps, repeats, warmup,
-                              lambda i, f, k: ends[i].append(estimate_errors(f, scenario.truth[k])), reports)
-        for (name, count, _), times, errors in zip(group, blocks, ends):
+        timer = ModelCallTimer(model) if model_calls else None
+        with timer or contextlib.nullcontext():
+            blocks = time_filters([make for _, _, make in group], scenario, model, steps, repeats, warmup,
+                                  lambda i, f, k: ends[i].append(estimate_errors(f, scenario.truth[k])), reports,
+                                  timer)
+        for i, ((name, count, _), times, errors) in enumerate(zip(group, blocks, ends)):
             results.append({"filter": name, "particles": count, "us_per_step": float(np.median(times)) * 1e6,
                             "blocks_us": [t * 1e6 for t in times], **accuracy(errors)})
+            if timer is not None:
+                inside, calls = np.median(np.array(timer.blocks[i]), axis=0)
+                results[-1].update(model_us_per_step=float(inside) * 1e6, model_calls_per_step=float(calls))
         by_name = {name: np.asarray(times) for (name, _, _), times in zip(group, blocks)}
         if _particle_filter(group[0][0]):
             for key, numerator, denominator in RATIOS:
                 if numerator in by_name and denominator in by_name:
                     ratios[key][str(n)] = float(np.median(by_name[numerator] / by_name[denominator]))
-    return {"results": results, **ratios, "warmup": warmup, "reports": reports,
+    return {"results": results, **ratios, "warmup": warmup, "reports": reports, "model_calls": model_calls,
             "machine": {"python": platform.python_version(), "numpy": np.__version__,
                         "processor": platform.machine(),
                         "allocator": "retain_freed_memory" if allocator.retained else "default",
@@ -186,17 +202,25 @@ def run(particle_counts=PARTICLE_COUNTS, repeats: int = 15, seed: int = 0, filte
 _LABELS = {"gpf": "GPF", "spf": "SPF", "gpf-paper": "GPF-paper", PEER: "particles"}  # (in the table's ratios)
 
 
+def _shown(us: float) -> str:
+    return f"{us:9.1f} us" if us < 1000 else f"{us / 1000:9.2f} ms"
+
+
 def format_table(report: dict) -> str:
     """A plain-text table of a :func:`run` report."""
+    inside = report.get("model_calls", False)
     lines = [f"{'filter':<10} {'N':>8} {'per step':>12} {'position m':>10} {'velocity m/s':>12} {'NEES':>7} "
-             f"{'worst m':>8}"]
+             f"{'worst m':>8}" + (f" {'in the model':>22}" if inside else "")]
     for r in report["results"]:
         n = "-" if r["particles"] is None else str(r["particles"])
-        us = r["us_per_step"]
-        shown = f"{us:9.1f} us" if us < 1000 else f"{us / 1000:9.2f} ms"
-        lines.append(f"{r['filter']:<10} {n:>8} {shown:>12} {r['position_rms_m']:>10.4g} "
-                     f"{r['velocity_rms_m_s']:>12.4g} {r['nees_mean']:>7.3g} {r['position_worst_m']:>8.4g}")
+        model = (f" {_shown(r['model_us_per_step'])} {r['model_us_per_step'] / r['us_per_step']:4.0%} "
+                 f"{r['model_calls_per_step']:4.0f}x") if inside else ""
+        lines.append(f"{r['filter']:<10} {n:>8} {_shown(r['us_per_step']):>12} {r['position_rms_m']:>10.4g} "
+                     f"{r['velocity_rms_m_s']:>12.4g} {r['nees_mean']:>7.3g} {r['position_worst_m']:>8.4g}{model}")
     lines.append("position, velocity (RMS), NEES (mean) and worst position error: the estimates at the blocks' ends")
+    if inside:
+        lines.append("in the model: time per step inside the lunar model's methods, its share of the step and the "
+                     "calls per step (every call timed: the steps are slower than without --model-calls)")
     read = ", every filter's observability report read at each step" if report.get("reports") else ""
     lines.append(f"ratios (medians over rounds of blocks timed in turn, after {report['warmup']} steps{read}):")
     for key, numerator, denominator in RATIOS:
@@ -225,6 +249,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--reports", action="store_true",
                         help="read every filter's observability report after each step (as the node's diagnostics "
                              "and the campaigns do; otherwise only the default's update reads it)")
+    parser.add_argument("--model-calls", action="store_true",
+                        help="also time each filter's calls into the lunar model: how much of its step is the "
+                             "model's and how much the filter's own (gpf_nav.experiments.model_calls)")
     parser.add_argument("--node", action="store_true",
                         help="run the ROS node-latency benchmark instead (arguments after -- go to it)")
     args, rest = parser.parse_known_args(argv)
@@ -239,7 +266,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as err:
         parser.error(str(err))
     report = run(tuple(args.particles) + ((LARGE,) if args.large else ()), args.repeats, filters=filters,
-                 warmup=args.warmup, reports=args.reports)
+                 warmup=args.warmup, reports=args.reports, model_calls=args.model_calls)
     print(json.dumps(report, indent=2) if args.json else format_table(report))
     return 0
 
