@@ -20,7 +20,8 @@ clouds are wide enough to be flattened at most updates; ``--warmup 300`` times t
 where most updates skip it (``docs/filters.md``). A filter's observability tracker runs its recursions when its
 report is read (:class:`~gpf_nav.integrity.observability.ObservabilityTracker`): the default reads it at every update,
 the others' are left queued and not timed unless ``--reports`` reads every filter's report after each step, as the
-node's diagnostics and the campaigns do.
+node's diagnostics and the campaigns do. ``--model-calls`` also times each filter's calls into the lunar model
+(:mod:`gpf_nav.experiments.model_calls`): how much of its step is the model's and how much the filter's own.
 ``gpf-nav bench`` runs with the heap tuning of :mod:`gpf_nav.allocator` and OpenMP's passive waits
 (:mod:`gpf_nav.openmp`; the report says whether each was applied); ``python -m gpf_nav.experiments.bench``
 runs with the C library's default allocator and OpenMP's default policy, for comparison. ``--node`` runs the
